@@ -1,0 +1,1 @@
+"""The dVRK over ROS 2 (CRTK topics). Needs the ``ros`` extra; nothing outside this package imports rclpy."""

@@ -1,0 +1,1 @@
+"""Learning algorithms and shipped policies for tissue retraction."""

@@ -1,0 +1,83 @@
+"""The project's exception hierarchy.
+
+Every error raised on purpose by tissue-retract derives from :class:`TissueRetractError`, so a caller
+can catch the project's failures without catching programming errors. Subclasses carry the offending
+data as attributes (joint, value, bound) so that callers and logs can act on them, not only print them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+__all__ = [
+    "ConfigurationError",
+    "JointLimitError",
+    "JointVectorError",
+    "NotBuiltError",
+    "TissueRetractError",
+    "UnknownVariantError",
+]
+
+
+class TissueRetractError(Exception):
+    """Root of every error the project raises on purpose."""
+
+
+class ConfigurationError(TissueRetractError, ValueError):
+    """A setting is missing, of the wrong type, or outside its allowed range.
+
+    Attributes:
+        field: Name of the offending setting.
+        value: The value that was given.
+        allowed: Human-readable description of what is allowed.
+    """
+
+    def __init__(self, field: str, value: object, allowed: str) -> None:
+        self.field = field
+        self.value = value
+        self.allowed = allowed
+        super().__init__(f"{field}={value!r} is not allowed: expected {allowed}")
+
+
+class UnknownVariantError(ConfigurationError):
+    """A named variant (arm, tool, task, ...) is not one the project knows.
+
+    Attributes:
+        valid: The names that are known.
+    """
+
+    def __init__(self, field: str, value: object, valid: Iterable[str]) -> None:
+        self.valid = tuple(valid)
+        super().__init__(field, value, "one of " + ", ".join(repr(v) for v in self.valid))
+
+
+class JointVectorError(TissueRetractError, ValueError):
+    """A joint vector has the wrong shape or holds non-finite values.
+
+    Attributes:
+        joint: Name of the offending joint, or None when the whole vector is wrong (its length).
+        value: The offending value (the joint value, or the vector's length).
+    """
+
+    def __init__(self, message: str, joint: str | None = None, value: object = None) -> None:
+        self.joint = joint
+        self.value = value
+        super().__init__(message)
+
+
+class JointLimitError(JointVectorError):
+    """A joint value lies outside its limits where strict checking was asked for.
+
+    Attributes:
+        bound: The limit that was crossed.
+    """
+
+    def __init__(self, joint: str, value: float, bound: float, kind: str = "position") -> None:
+        self.bound = bound
+        self.kind = kind
+        side = "above the upper" if value > bound else "below the lower"
+        super().__init__(f"joint {joint!r} {kind} {value:.6g} is {side} limit {bound:.6g}", joint=joint, value=value)
+
+
+class NotBuiltError(TissueRetractError):
+    """A command exists in the interface but is not implemented in this version."""

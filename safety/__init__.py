@@ -1,0 +1,1 @@
+"""The safety layer between a policy's command and the robot."""

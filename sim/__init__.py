@@ -1,0 +1,1 @@
+"""PyBullet simulation of soft-tissue retraction with the dVRK PSM."""

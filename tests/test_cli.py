@@ -1,0 +1,74 @@
+"""Smoke runs of the command line, as a user would type it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from psm_control.cli import _NOT_BUILT, EXIT_NOT_BUILT
+
+SUBCOMMANDS = (
+    "demo",
+    "train",
+    "evaluate",
+    "deploy",
+    "robustness",
+    "tune-safety",
+    "sim-dvrk",
+    "replay",
+    "bench",
+    "safety",
+)
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "psm_control", *args], capture_output=True, text=True, timeout=300, check=False
+    )
+
+
+def test_help_lists_every_subcommand() -> None:
+    """--help lists every subcommand the interface promises."""
+    result = _cli("--help")
+    assert result.returncode == 0
+    for name in SUBCOMMANDS:
+        assert name in result.stdout
+
+
+def test_version() -> None:
+    """--version prints the package version."""
+    from psm_control import __version__
+
+    result = _cli("--version")
+    assert result.returncode == 0
+    assert __version__ in result.stdout
+
+
+@pytest.mark.parametrize("name", sorted(_NOT_BUILT))
+def test_unbuilt_subcommand_says_so_and_fails(name: str) -> None:
+    """A subcommand not built yet says so and exits non-zero, printing no result."""
+    result = _cli(name)
+    assert result.returncode == EXIT_NOT_BUILT
+    assert "not built" in result.stderr
+    assert result.stdout == ""
+
+
+def test_kinematics_demo_agrees_three_ways() -> None:
+    """The demo prints the tool-tip table and the three kinematics agree."""
+    result = _cli("demo", "--arm", "si")
+    assert result.returncode == 0, result.stderr
+    assert "psm_si_420006" in result.stdout
+    assert "largest disagreement" in result.stdout
+
+
+def test_all_packages_import() -> None:
+    """The five top-level packages import."""
+    result = subprocess.run(
+        [sys.executable, "-c", "import psm_control, sim, policies, safety, hardware_if"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
