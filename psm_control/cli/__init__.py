@@ -1,28 +1,30 @@
 """The ``tissue-retract`` command line.
 
-Each subcommand lives in its own module with ``add_parser(subparsers)`` and ``run(args) -> int``;
-modules import their heavy dependencies inside ``run`` so that ``--help`` stays fast. A subcommand
-that is not built in this version says so and exits non-zero: it never prints a made-up result.
+Each subcommand lives in its own module ``psm_control.cli.<name>`` (dashes become underscores) with
+``add_parser(subparsers)`` and ``run(args) -> int``; modules import their heavy dependencies inside
+``run`` so that ``--help`` stays fast. A subcommand whose module is not in this version says so and
+exits non-zero: it never prints a made-up result.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import sys
 from collections.abc import Callable
 
 from psm_control import __version__
-from psm_control.cli import kinematics_demo
 from psm_control.errors import TissueRetractError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["EXIT_NOT_BUILT", "SUBCOMMANDS", "build_parser", "main"]
 
 #: Exit status of a subcommand that exists in the interface but is not built in this version.
 EXIT_NOT_BUILT = 3
 
-# Subcommands named in the interface whose implementation is not part of this version, with what
-# they will do. Each moves to a module of its own when it is built.
-_NOT_BUILT = {
+#: Every subcommand of the interface, with a one-line summary.
+SUBCOMMANDS = {
+    "demo": "run the simulation's demo (today: the PSM's kinematics, cross-checked)",
     "train": "train a policy (DDPG+HER, SQIL, DDPGBC, CoL, DEX) on a task",
     "evaluate": "evaluate a policy through the safety chain",
     "deploy": "deploy a policy to the simulation or a dVRK over ROS 2",
@@ -33,6 +35,16 @@ _NOT_BUILT = {
     "bench": "measure speed (env, chain, ros)",
     "safety": "show the effective safety limits",
 }
+
+
+def module_name(command: str) -> str:
+    """The module that implements a subcommand."""
+    return f"psm_control.cli.{command.replace('-', '_')}"
+
+
+def is_built(command: str) -> bool:
+    """Whether this version implements a subcommand."""
+    return importlib.util.find_spec(module_name(command)) is not None
 
 
 def _not_built(name: str) -> Callable[[argparse.Namespace], int]:
@@ -51,11 +63,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    kinematics_demo.add_parser(subparsers)
-    for name, help_text in _NOT_BUILT.items():
-        sub = subparsers.add_parser(name, help=f"{help_text} (not built yet)", description=help_text)
-        sub.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
-        sub.set_defaults(func=_not_built(name))
+    for name, summary in SUBCOMMANDS.items():
+        if is_built(name):
+            importlib.import_module(module_name(name)).add_parser(subparsers)
+        else:
+            sub = subparsers.add_parser(name, help=f"{summary} (not built yet)", description=summary)
+            sub.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+            sub.set_defaults(func=_not_built(name))
     return parser
 
 
