@@ -40,7 +40,7 @@ def _resolve(worker: str) -> Callable[..., dict[str, Any]]:
     function = getattr(importlib.import_module(module_name), function_name, None)
     if not callable(function):
         raise ConfigurationError("worker", worker, "the name of a callable")
-    return function  # type: ignore[no-any-return]
+    return function
 
 
 def call_worker(worker: str, trial: dict[str, Any], kwargs: dict[str, Any]) -> dict[str, Any]:
