@@ -64,7 +64,7 @@ def _run_local(
     store: EpisodeStore,
     max_attempts: int,
     progress: tqdm,
-) -> None:  # type: ignore[type-arg]
+) -> None:
     attempts = {t.index: 0 for t in pending}
     queue = list(pending)
     while queue:
@@ -116,7 +116,7 @@ def _run_ray(
     store: EpisodeStore,
     max_attempts: int,
     progress: tqdm,
-) -> None:  # type: ignore[type-arg]
+) -> None:
     try:
         import ray
     except ImportError as e:
