@@ -1,0 +1,191 @@
+"""What every algorithm shares: normalisers, the actor's interface, batched updates and target networks.
+
+An algorithm subclasses :class:`Agent` and says only how it differs: which networks it builds
+(:meth:`Agent.build`), how it explores (:meth:`Agent.explore`) and what one gradient update does
+(:meth:`Agent.update`). Sampling, normalisation and tensor conversion for all of an episode's updates
+happen at once in :meth:`Agent.train`, which keeps the per-update Python overhead to the optimiser steps.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Iterable
+from typing import NamedTuple
+
+import numpy as np
+import torch
+from torch import nn
+
+from policies.buffers import Batch, EpisodeBuffer, RewardFn
+from policies.config import TrainConfig
+from policies.normalizer import Normalizer
+
+__all__ = ["Agent", "Dims", "TensorBatch", "polyak"]
+
+
+class Dims(NamedTuple):
+    """Sizes of the spaces an agent acts in."""
+
+    obs: int
+    goal: int
+    action: int
+
+
+class TensorBatch(NamedTuple):
+    """A batch ready for the networks: ``x`` is the normalised observation and goal, concatenated."""
+
+    x: torch.Tensor
+    action: torch.Tensor
+    reward: torch.Tensor
+    next_x: torch.Tensor
+    next_action: torch.Tensor
+    done: torch.Tensor
+
+    def cat(self, other: TensorBatch) -> TensorBatch:
+        """Rows of ``self`` followed by rows of ``other``."""
+        return TensorBatch(*(torch.cat((a, b)) for a, b in zip(self, other, strict=True)))
+
+    def rows(self, start: int, stop: int) -> TensorBatch:
+        """Rows ``start:stop``."""
+        return TensorBatch(*(t[start:stop] for t in self))
+
+
+@torch.no_grad()
+def polyak(target: nn.Module, online: nn.Module, tau: float) -> None:
+    """target <- (1 - tau) target + tau online, for every parameter."""
+    torch._foreach_lerp_(list(target.parameters()), list(online.parameters()), tau)
+
+
+def adam(params: Iterable[torch.Tensor], lr: float) -> torch.optim.Adam:
+    """Adam as used by every algorithm here (multi-tensor kernels: fewer Python-level ops per step)."""
+    return torch.optim.Adam(params, lr=lr, foreach=True)
+
+
+class Agent(abc.ABC):
+    """An off-policy goal-conditioned agent.
+
+    Args:
+        dims: Observation, goal and action sizes.
+        config: Hyperparameters.
+        seed: Seed of the agent's own randomness (network initialisation, exploration noise).
+    """
+
+    #: Name used in checkpoints and on the command line.
+    name: str = ""
+
+    def __init__(self, dims: Dims, config: TrainConfig, seed: int = 0) -> None:
+        self.dims = dims
+        self.config = config
+        self.generator = torch.manual_seed(seed)
+        self.rng = np.random.default_rng(seed)
+        c = config
+        self.obs_norm = Normalizer(dims.obs, c.norm_eps, c.norm_clip, c.obs_clip)
+        self.goal_norm = Normalizer(dims.goal, c.norm_eps, c.norm_clip, c.obs_clip)
+        self.in_dim = dims.obs + dims.goal
+        self.updates = 0
+        self.build()
+
+    @property
+    @abc.abstractmethod
+    def actor(self) -> nn.Module:
+        """The network whose ``forward(x)`` is the deterministic action in [-1, 1]."""
+
+    @abc.abstractmethod
+    def build(self) -> None:
+        """Create networks and optimisers."""
+
+    @abc.abstractmethod
+    def modules(self) -> dict[str, nn.Module]:
+        """Every network by name (checkpointed)."""
+
+    @abc.abstractmethod
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        """Every optimiser by name (checkpointed for resuming)."""
+
+    @abc.abstractmethod
+    def update(self, batch: TensorBatch, demo: TensorBatch | None) -> dict[str, float]:
+        """One gradient update from an agent batch and, for demonstration-based algorithms, a demo batch."""
+
+    def extra_tensors(self) -> dict[str, torch.Tensor]:
+        """Learnable tensors outside :meth:`modules` (SAC's temperature), checkpointed too."""
+        return {}
+
+    # --- acting ---------------------------------------------------------------------------------------
+
+    def inputs(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """The network input for raw observations and goals: both normalised, concatenated."""
+        return np.concatenate((self.obs_norm(obs), self.goal_norm(goal)), axis=-1)
+
+    @torch.inference_mode()
+    def act(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """The deterministic action(s) in [-1, 1] for raw observation(s) and goal(s)."""
+        x = torch.from_numpy(self.inputs(obs, goal))
+        return self.actor(x).numpy()
+
+    def explore(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """An exploratory action: the deterministic action plus Gaussian noise, sometimes a random one."""
+        c = self.config
+        if c.random_eps > 0 and self.rng.random() < c.random_eps:
+            return self.rng.uniform(-1.0, 1.0, self.dims.action).astype(np.float32)
+        a = self.act(obs, goal)
+        a = a + c.noise_std * self.rng.standard_normal(a.shape).astype(np.float32)
+        return np.clip(a, -1.0, 1.0)
+
+    # --- learning -------------------------------------------------------------------------------------
+
+    def observe_episode(self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray) -> None:
+        """Update the normalisers with an episode's observations and goals (desired and achieved)."""
+        self.obs_norm.update(obs)
+        self.goal_norm.update(np.concatenate((desired_goal, achieved_goal)))
+
+    def to_tensors(self, batch: Batch, reward_shift: float = 0.0) -> TensorBatch:
+        """Normalise a sampled batch and make it tensors."""
+        return TensorBatch(
+            x=torch.from_numpy(self.inputs(batch.obs, batch.goal)),
+            action=torch.from_numpy(np.ascontiguousarray(batch.action)),
+            reward=torch.from_numpy(batch.reward + np.float32(reward_shift)).unsqueeze(-1),
+            next_x=torch.from_numpy(self.inputs(batch.next_obs, batch.goal)),
+            next_action=torch.from_numpy(np.ascontiguousarray(batch.next_action)),
+            done=torch.from_numpy(batch.done).unsqueeze(-1),
+        )
+
+    def sample(
+        self, buffer: EpisodeBuffer, count: int, reward_fn: RewardFn, reward_override: float | None = None
+    ) -> TensorBatch:
+        """Sample ``count`` HER-relabelled transitions and make them network-ready."""
+        raw = buffer.sample(count, self.rng, reward_fn, self.config.her_probability, reward_override)
+        return self.to_tensors(raw)
+
+    def agent_reward(self) -> float | None:
+        """A constant reward replacing the env's on agent transitions (SQIL), or None."""
+        return None
+
+    def demo_reward(self) -> float | None:
+        """A constant reward replacing the env's on demonstration transitions (SQIL), or None."""
+        return None
+
+    def train(
+        self,
+        buffer: EpisodeBuffer,
+        demos: EpisodeBuffer | None,
+        reward_fn: RewardFn,
+        n_updates: int,
+    ) -> dict[str, float]:
+        """Run ``n_updates`` gradient updates, sampling every batch up front; returns the last metrics."""
+        if n_updates <= 0 or len(buffer) == 0:
+            return {}
+        B = self.config.batch_size
+        agent = self.sample(buffer, n_updates * B, reward_fn, self.agent_reward())
+        demo = None
+        if demos is not None and len(demos) > 0 and self.config.uses_demos:
+            demo = self.sample(demos, n_updates * B, reward_fn, self.demo_reward())
+        metrics: dict[str, float] = {}
+        for i in range(n_updates):
+            rows = (i * B, (i + 1) * B)
+            metrics = self.update(agent.rows(*rows), None if demo is None else demo.rows(*rows))
+            self.updates += 1
+        return metrics
+
+    def pretrain(self, demos: EpisodeBuffer, reward_fn: RewardFn, steps: int) -> dict[str, float]:
+        """Learning from demonstrations alone before interacting (nothing by default; CoL overrides)."""
+        return {}

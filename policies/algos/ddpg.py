@@ -1,0 +1,91 @@
+"""DDPG with hindsight experience replay: the base of the DDPG family (DDPGBC, CoL, DEX).
+
+Deterministic tanh actor, one critic, Polyak-averaged targets, Gaussian exploration noise. The critic
+regresses on r + gamma Q_targ(s', pi_targ(s')) clipped to the range of returns of 0/-1 rewards,
+[-1 / (1 - gamma), 0]; the actor minimises -Q(s, pi(s)) + action_l2 * mean(pi(s)^2).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import torch
+from torch import nn
+from torch.nn import functional as F  # noqa: N812 (the conventional name)
+
+from policies.algos.base import Agent, TensorBatch, adam, polyak
+from policies.networks import Critic, DeterministicActor
+
+__all__ = ["DDPG"]
+
+
+class DDPG(Agent):
+    """DDPG+HER."""
+
+    name = "ddpg"
+
+    def build(self) -> None:
+        c, h = self.config, self.config.hidden
+        self._actor = DeterministicActor(self.in_dim, self.dims.action, h)
+        self.critic = Critic(self.in_dim, self.dims.action, h)
+        self.actor_target = copy.deepcopy(self._actor).requires_grad_(False)
+        self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        self.actor_opt = adam(self._actor.parameters(), c.lr_actor)
+        self.critic_opt = adam(self.critic.parameters(), c.lr_critic)
+
+    @property
+    def actor(self) -> nn.Module:
+        return self._actor
+
+    def modules(self) -> dict[str, nn.Module]:
+        return {
+            "actor": self._actor,
+            "critic": self.critic,
+            "actor_target": self.actor_target,
+            "critic_target": self.critic_target,
+        }
+
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        return {"actor_opt": self.actor_opt, "critic_opt": self.critic_opt}
+
+    @property
+    def q_bounds(self) -> tuple[float, float]:
+        """Range the critic target is clipped to: returns of 0/-1 rewards."""
+        return -1.0 / (1.0 - self.config.gamma), 0.0
+
+    def critic_target_value(self, batch: TensorBatch, demo: TensorBatch | None) -> torch.Tensor:
+        """The critic's regression target for ``batch`` (no gradient)."""
+        with torch.no_grad():
+            next_q = self.critic_target(batch.next_x, self.actor_target(batch.next_x))
+            target = batch.reward + self.config.gamma * (1.0 - batch.done) * next_q
+            return target.clamp(*self.q_bounds)
+
+    def critic_batch(self, batch: TensorBatch, demo: TensorBatch | None) -> TensorBatch:
+        """The transitions the critic learns from (the agent batch here)."""
+        return batch
+
+    def actor_loss(self, batch: TensorBatch, demo: TensorBatch | None) -> tuple[torch.Tensor, dict[str, float]]:
+        """-Q(s, pi(s)) plus the action penalty, over the agent batch."""
+        action = self._actor(batch.x)
+        loss = -self.critic(batch.x, action).mean() + self.config.action_l2 * action.pow(2).mean()
+        return loss, {}
+
+    def update(self, batch: TensorBatch, demo: TensorBatch | None) -> dict[str, float]:
+        cb = self.critic_batch(batch, demo)
+        target = self.critic_target_value(cb, demo)
+        critic_loss = F.mse_loss(self.critic(cb.x, cb.action), target)
+        self.critic_opt.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_opt.step()
+
+        actor_loss, metrics = self.actor_loss(batch, demo)
+        self.actor_opt.zero_grad(set_to_none=True)
+        actor_loss.backward()
+        self.actor_opt.step()
+
+        tau = self.config.tau
+        polyak(self.critic_target, self.critic, tau)
+        polyak(self.actor_target, self._actor, tau)
+        metrics["critic_loss"] = critic_loss.item()
+        metrics["actor_loss"] = actor_loss.item()
+        return metrics

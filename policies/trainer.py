@@ -1,0 +1,318 @@
+"""The training loop behind ``tissue-retract train``: collect, learn, evaluate, checkpoint, resume.
+
+One episode at a time: the first ``random_steps`` env steps take uniformly random actions, later ones
+the agent's exploratory actions; each finished episode goes to the HER buffer and the normalisers, then
+``updates_per_episode`` gradient updates run with all their batches sampled at once. Every
+``eval_every`` episodes the deterministic actor is scored on a fixed set of evaluation episodes
+(success at the final step, as in the paper), logged to TensorBoard and ``eval.csv``, and a resumable
+checkpoint is written atomically. Training episodes are seeded from (seed, episode index), so a run
+resumed from its checkpoint sees the same episodes it would have seen.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import importlib
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from policies.algos import Agent, Dims, make_agent
+from policies.buffers import Episode, EpisodeBuffer, RewardFn
+from policies.checkpoint import (
+    check_spaces,
+    env_spaces,
+    load_agent,
+    load_checkpoint,
+    save_checkpoint,
+)
+from policies.config import TrainConfig
+from policies.demos import collect_demos, expert_for, load_demos, rollout
+from policies.errors import CheckpointError
+from psm_control.errors import ConfigurationError, UnknownVariantError
+
+__all__ = ["POLICY_FILE", "RESUME_FILE", "RunSpec", "TrainResult", "ensure_registered", "evaluate", "train"]
+
+RESUME_FILE = "resume.safetensors"
+POLICY_FILE = "policy.safetensors"
+_EVAL_SEED = 1_000_000_007
+_DEMO_SEED = 500_000_003
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """What to train, for how long, and where to write.
+
+    Attributes:
+        task_id: Gymnasium id of the goal task.
+        seed: Seed of the run (networks, exploration, episodes).
+        episodes: Training episodes.
+        demos: Demonstration episodes (ignored by DDPG).
+        out_dir: Directory of checkpoints, TensorBoard logs and ``eval.csv``.
+        eval_every: Evaluate and checkpoint every this many episodes (and at the end).
+        eval_episodes: Evaluation episodes per evaluation.
+        demos_file: Read demonstrations from this ``.npz`` instead of running the expert.
+        command: The exact command line, recorded in checkpoints.
+        resume: Continue from ``out_dir``'s checkpoint when there is one.
+        progress: Show a progress bar.
+        tensorboard: Write TensorBoard logs.
+    """
+
+    task_id: str
+    seed: int = 1
+    episodes: int = 1000
+    demos: int = 100
+    out_dir: Path = Path("runs/train")
+    eval_every: int = 50
+    eval_episodes: int = 50
+    demos_file: Path | None = None
+    command: str = ""
+    resume: bool = True
+    progress: bool = True
+    tensorboard: bool = True
+
+    def __post_init__(self) -> None:
+        for name, low in (("seed", 0), ("episodes", 1), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                raise ConfigurationError(name, value, f"an integer >= {low}")
+
+
+@dataclass
+class TrainResult:
+    """What a run produced."""
+
+    policy_path: Path
+    resume_path: Path
+    success_rates: list[tuple[int, float]] = field(default_factory=list)
+    env_steps: int = 0
+    train_seconds: float = 0.0
+    update_seconds: float = 0.0
+    resumed_from: int = 0
+
+    @property
+    def steps_per_second(self) -> float:
+        """Env steps per second of training, gradient updates included (evaluation excluded)."""
+        return self.env_steps / self.train_seconds if self.train_seconds > 0 else float("nan")
+
+    @property
+    def final_success(self) -> float:
+        """Success rate of the last evaluation."""
+        return self.success_rates[-1][1] if self.success_rates else float("nan")
+
+
+def ensure_registered(task_id: str) -> None:
+    """Make ``task_id`` known to Gymnasium, importing the simulation package only when needed.
+
+    Raises:
+        UnknownVariantError: No such task after importing ``sim``.
+    """
+    importlib.import_module("policies")
+    if task_id in gym.registry:
+        return
+    with contextlib.suppress(ImportError):
+        importlib.import_module("sim")
+    if task_id not in gym.registry:
+        known = sorted(k for k in gym.registry if k.startswith("TissueRetract-"))
+        raise UnknownVariantError("task", task_id, known)
+
+
+def evaluate(agent: Agent, env: gym.Env[Any, Any], episodes: int) -> float:
+    """Success rate of the deterministic actor over fixed evaluation episodes (success at the final step)."""
+    successes = 0
+    for i in range(episodes):
+        _, success = rollout(env, lambda o: agent.act(o["observation"], o["desired_goal"]), seed=_EVAL_SEED + i)
+        successes += success
+    return successes / episodes
+
+
+def _demonstrations(spec: RunSpec, env: gym.Env[Any, Any]) -> list[Episode]:
+    if spec.demos == 0:
+        return []
+    if spec.demos_file is not None:
+        return load_demos(spec.demos_file, spec.demos)
+    return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=_DEMO_SEED + 1000 * spec.seed)
+
+
+class _Logger:
+    """TensorBoard scalars and the evaluation CSV."""
+
+    def __init__(self, out_dir: Path, tensorboard: bool) -> None:
+        self.csv_path = out_dir / "eval.csv"
+        new = not self.csv_path.exists()
+        self.csv_file = self.csv_path.open("a", newline="")
+        self.csv = csv.writer(self.csv_file)
+        if new:
+            self.csv.writerow(["episode", "env_steps", "updates", "success_rate", "train_steps_per_s"])
+        self.writer: Any = None
+        if tensorboard:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.writer = SummaryWriter(str(out_dir / "tb"))
+
+    def scalars(self, values: dict[str, float], step: int) -> None:
+        if self.writer is not None:
+            for key, value in values.items():
+                self.writer.add_scalar(key, value, step)
+
+    def evaluation(self, episode: int, env_steps: int, updates: int, success: float, speed: float) -> None:
+        self.csv.writerow([episode, env_steps, updates, f"{success:.4f}", f"{speed:.1f}"])
+        self.csv_file.flush()
+        self.scalars({"eval/success_rate": success, "train/env_steps_per_s": speed}, env_steps)
+
+    def close(self) -> None:
+        self.csv_file.close()
+        if self.writer is not None:
+            self.writer.close()
+
+
+def train(spec: RunSpec, config: TrainConfig) -> TrainResult:
+    """Train ``config.algo`` on ``spec.task_id``; returns where the policy is and how the run went."""
+    torch.set_num_threads(1)
+    ensure_registered(spec.task_id)
+    env = gym.make(spec.task_id)
+    eval_env = gym.make(spec.task_id)
+    try:
+        return _train(spec, config, env, eval_env)
+    finally:
+        env.close()
+        eval_env.close()
+
+
+def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env: gym.Env[Any, Any]) -> TrainResult:
+    spaces = env_spaces(env)
+    dims = Dims(
+        int(np.prod(spaces["observation"])),
+        int(np.prod(spaces["desired_goal"])),
+        int(np.prod(spaces["action"]["shape"])),
+    )
+    horizon = int(env.spec.max_episode_steps or 50) if env.spec is not None else 50
+    reward_fn: RewardFn = env.unwrapped.compute_reward  # type: ignore[attr-defined]
+    out = Path(spec.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    resume_path, policy_path = out / RESUME_FILE, out / POLICY_FILE
+
+    buffer = EpisodeBuffer(config.buffer_size, horizon, dims.obs, dims.goal, dims.action)
+    demos = _demonstrations(spec, env) if config.uses_demos else []
+    demo_buffer = None
+    if demos:
+        demo_buffer = EpisodeBuffer(len(demos) * horizon, horizon, dims.obs, dims.goal, dims.action)
+        for episode in demos:
+            demo_buffer.add(episode)
+
+    start_episode, env_steps = 0, 0
+    if spec.resume and resume_path.exists():
+        agent, start_episode, env_steps = _resume(resume_path, spec, config, env, buffer)
+    else:
+        agent = make_agent(dims, config, spec.seed)
+        for episode in demos:
+            agent.observe_episode(episode.obs, episode.achieved_goal, episode.desired_goal)
+        if demo_buffer is not None and config.pretrain_steps > 0:
+            agent.pretrain(demo_buffer, reward_fn, config.pretrain_steps)
+
+    result = TrainResult(policy_path, resume_path, resumed_from=start_episode)
+    logger = _Logger(out, spec.tensorboard)
+    bar = None
+    if spec.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=spec.episodes, initial=start_episode, desc=f"{config.algo} {spec.task_id}", unit="ep")
+
+    def checkpoint(episode: int) -> None:
+        progress = {"episodes": episode, "env_steps": env_steps, "updates": agent.updates}
+        common: dict[str, Any] = {"task_id": spec.task_id, "spaces": spaces, "command": spec.command}
+        save_checkpoint(
+            resume_path, agent, progress=progress, training=True, arrays=_prefixed("replay", buffer.state()),
+            rng={"agent": agent.rng.bit_generator.state, "seed": spec.seed}, **common,
+        )  # fmt: skip
+        save_checkpoint(policy_path, agent, progress=progress, **common)
+
+    metrics: dict[str, float] = {}
+    try:
+        for episode_index in range(start_episode, spec.episodes):
+            t0 = time.perf_counter()
+            obs, _ = env.reset(seed=spec.seed * 1_000_003 + episode_index)
+            o, ag, g, a, term = [obs["observation"]], [obs["achieved_goal"]], [], [], []
+            while True:
+                if env_steps < config.random_steps:
+                    action = agent.rng.uniform(-1.0, 1.0, dims.action).astype(np.float32)
+                else:
+                    action = agent.explore(obs["observation"], obs["desired_goal"])
+                g.append(obs["desired_goal"])
+                obs, _, terminated, truncated, _ = env.step(action)
+                env_steps += 1
+                o.append(obs["observation"])
+                ag.append(obs["achieved_goal"])
+                a.append(action)
+                term.append(terminated)
+                if terminated or truncated:
+                    break
+            episode = Episode(
+                np.asarray(o, np.float32), np.asarray(ag, np.float32), np.asarray(g, np.float32),
+                np.asarray(a, np.float32), np.asarray(term, bool),
+            )  # fmt: skip
+            buffer.add(episode)
+            agent.observe_episode(episode.obs, episode.achieved_goal, episode.desired_goal)
+            t1 = time.perf_counter()
+            if env_steps >= config.random_steps:
+                metrics = agent.train(buffer, demo_buffer, reward_fn, config.updates_per_episode)
+            t2 = time.perf_counter()
+            result.train_seconds += t2 - t0
+            result.update_seconds += t2 - t1
+            result.env_steps += len(episode.action)
+            done = episode_index + 1
+            if bar is not None:
+                bar.update(1)
+            if done % spec.eval_every == 0 or done == spec.episodes:
+                success = evaluate(agent, eval_env, spec.eval_episodes)
+                result.success_rates.append((done, success))
+                logger.evaluation(done, env_steps, agent.updates, success, result.steps_per_second)
+                logger.scalars({f"train/{k}": v for k, v in metrics.items()}, env_steps)
+                checkpoint(done)
+                if bar is not None:
+                    bar.set_postfix(success=f"{success:.2f}", steps_s=f"{result.steps_per_second:.0f}")
+        if start_episode >= spec.episodes:
+            checkpoint(start_episode)
+    finally:
+        if bar is not None:
+            bar.close()
+        logger.close()
+    return result
+
+
+def _prefixed(prefix: str, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    return {f"{prefix}.{k}": v for k, v in arrays.items()}
+
+
+def _resume(
+    path: Path, spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], buffer: EpisodeBuffer
+) -> tuple[Agent, int, int]:
+    ckpt = load_checkpoint(path)
+    meta = ckpt.meta
+    if meta.get("kind") != "training":
+        raise CheckpointError(path, "is not a training checkpoint and cannot be resumed")
+    check_spaces(path, meta.get("spaces", {}), env)
+    saved_seed = meta.get("rng", {}).get("seed")
+    for name, saved, wanted in (
+        ("task", meta.get("task_id"), spec.task_id),
+        ("seed", saved_seed, spec.seed),
+        ("config", meta.get("config"), config.to_dict()),
+    ):
+        if saved != wanted:
+            raise CheckpointError(
+                path,
+                f"was written by a run with a different {name} ({saved!r}, now {wanted!r}); "
+                "pass --fresh to start over or choose another --out",
+            )
+    agent = load_agent(ckpt, spec.seed)
+    agent.rng.bit_generator.state = meta["rng"]["agent"]
+    torch.set_rng_state(ckpt.tensors["rng.torch"])
+    buffer.load_state({k: v.numpy() for k, v in ckpt.group("replay").items()})
+    progress = meta.get("progress", {})
+    return agent, int(progress.get("episodes", 0)), int(progress.get("env_steps", 0))
