@@ -1,0 +1,63 @@
+"""The TissueRetract environments, one class per task, registered with Gymnasium on ``import sim``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+from psm_control.errors import UnknownVariantError
+from sim.envs.base import EnvConfig, TissueRetractEnv
+from sim.envs.expose import ExposeEnv
+from sim.envs.lift import LiftEnv
+from sim.envs.multisite import MultiSiteEnv
+from sim.envs.target import TargetEnv
+
+__all__ = [
+    "TASKS",
+    "EnvConfig",
+    "ExposeEnv",
+    "LiftEnv",
+    "MultiSiteEnv",
+    "TargetEnv",
+    "TissueRetractEnv",
+    "make",
+    "register",
+]
+
+#: Task ids (as the CLI takes them) -> (Gymnasium id, class).
+TASKS: dict[str, tuple[str, type[TissueRetractEnv]]] = {
+    "lift": ("TissueRetract-Lift-v0", LiftEnv),
+    "target": ("TissueRetract-Target-v0", TargetEnv),
+    "multisite": ("TissueRetract-MultiSite-v0", MultiSiteEnv),
+    "expose": ("TissueRetract-Expose-v0", ExposeEnv),
+}
+_ALIASES = {"1": "lift", "i": "lift", "2": "target", "ii": "target", "3": "multisite", "iii": "multisite"}
+
+#: Episode length of every task (the paper's horizon).
+MAX_EPISODE_STEPS = 50
+
+
+def register() -> None:
+    """Register every task with Gymnasium (idempotent)."""
+    for env_id, cls in TASKS.values():
+        if env_id not in gym.registry:
+            gym.register(env_id, entry_point=f"{cls.__module__}:{cls.__name__}", max_episode_steps=MAX_EPISODE_STEPS)
+
+
+def gym_id(task: str) -> str:
+    """The Gymnasium id of a task given as a CLI id (``lift``, ``3``, ``III``) or a Gymnasium id."""
+    key = task.strip().lower()
+    key = _ALIASES.get(key, key)
+    if key in TASKS:
+        return TASKS[key][0]
+    for env_id, _ in TASKS.values():
+        if task == env_id:
+            return env_id
+    raise UnknownVariantError("task", task, [*TASKS, *(env_id for env_id, _ in TASKS.values())])
+
+
+def make(task: str, **kwargs: Any) -> gym.Env[Any, Any]:
+    """``gym.make`` for a task given by any of its names."""
+    register()
+    return gym.make(gym_id(task), **kwargs)

@@ -1,0 +1,333 @@
+"""The goal-conditioned retraction environment that every task specialises.
+
+One environment owns one PyBullet physics client. A step turns the 5-D action into a
+:class:`~psm_control.commands.CartesianDelta`, gives it to the controller once, then ticks the
+controller and applies its joint set-points during the physics substeps. Tasks say only which grasp
+site counts, how the goal is drawn and what the achieved goal is.
+"""
+
+from __future__ import annotations
+
+import collections
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pinocchio as pin
+import pybullet as p
+
+from psm_control.commands import CartesianDelta, MeasuredState
+from psm_control.errors import UnknownVariantError
+from psm_control.robot import PsmModel
+from sim.backend import SimBackend
+from sim.control import make_controller
+from sim.exposure import exposed_fraction, surface_samples
+from sim.grasp import GraspParams
+from sim.mechanics import DamageLimits, measure
+from sim.randomization import Randomizer
+from sim.rendering import Camera, Frame, render
+from sim.scene import HIDDEN_HALF_EXTENTS_M, PhysicsParams, Scene
+from sim.tissue import TissueParams
+
+__all__ = ["EnvConfig", "TissueRetractEnv"]
+
+_OBS_SIZE = 18
+_UNSTABLE_SPEED_M_S = 5.0
+_UNSTABLE_DISTANCE_M = 0.5
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Settings of a retraction environment.
+
+    Attributes:
+        max_step_m: Tool-tip translation of a full action [m].
+        max_yaw_rad: Tool yaw of a full action [rad] (0 ignores the yaw action, as the paper did).
+        jaw_open_rad: Jaw angle for a non-negative jaw action [rad]; a negative one closes it.
+        jaw_closed_rad: Jaw angle for a negative jaw action [rad].
+        success_threshold_m: Goal distance that counts as success [m].
+        safety: Run the control chain's safety filter (False is an ablation).
+        physics: Physics stepping.
+        tissue: Flap settings (randomized fields are overridden per episode).
+        grasp: Grasp settings.
+        damage: Tissue damage thresholds.
+        randomization: Overrides of the randomization ranges.
+        camera: The endoscope camera.
+    """
+
+    max_step_m: float = 0.005
+    max_yaw_rad: float = 0.0
+    jaw_open_rad: float = 0.6
+    jaw_closed_rad: float = 0.0
+    success_threshold_m: float = 0.005
+    safety: bool = True
+    physics: PhysicsParams = field(default_factory=PhysicsParams)
+    tissue: TissueParams = field(default_factory=TissueParams)
+    grasp: GraspParams = field(default_factory=GraspParams)
+    damage: DamageLimits = field(default_factory=DamageLimits)
+    randomization: dict[str, tuple[float, float]] = field(default_factory=dict)
+    camera: Camera = field(default_factory=Camera)
+
+
+class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
+    """Grasp a tissue flap with the PSM and retract it (goal-conditioned, sparse reward).
+
+    Args:
+        config: Environment settings.
+        render_mode: ``None`` or ``"rgb_array"``.
+        **overrides: Fields of :class:`EnvConfig` (``gym.make(id, safety=False)``).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}  # noqa: RUF012 (Gymnasium convention)
+    #: Task option keys accepted by ``reset(options=...)`` besides the randomization parameters.
+    task_options: tuple[str, ...] = ("site", "goal")
+    goal_size = 3
+
+    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, **overrides: Any) -> None:
+        base = config if config is not None else EnvConfig()
+        self.config = EnvConfig(**{**base.__dict__, **overrides})
+        if render_mode not in (None, "rgb_array"):
+            raise UnknownVariantError("render_mode", render_mode, ["None", "rgb_array"])
+        self.render_mode = render_mode
+        self.randomizer = Randomizer(self.config.randomization)
+        self.model = PsmModel()
+        self.client = p.connect(p.DIRECT)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(5,), dtype=np.float32)
+        box = gym.spaces.Box(-np.inf, np.inf, shape=(_OBS_SIZE,), dtype=np.float32)
+        goal = gym.spaces.Box(-np.inf, np.inf, shape=(self.goal_size,), dtype=np.float32)
+        self.observation_space = gym.spaces.Dict(  # type: ignore[assignment]
+            {"observation": box, "achieved_goal": goal, "desired_goal": goal}
+        )
+        self.scene: Scene | None = None
+        self.values: dict[str, float] = {}
+        self.site = "centre"
+        self.goal = np.zeros(self.goal_size)
+        self.controller_name = ""
+
+    # ----------------------------------------------------------------- task hooks
+    def _choose_site(self, rng: np.random.Generator) -> str:
+        return "centre"
+
+    def _sample_goal(self, rng: np.random.Generator, site_position: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def _achieved_goal(self) -> np.ndarray:
+        return self.site_position()
+
+    # ----------------------------------------------------------------- Gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Start an episode; ``options`` may fix any randomization parameter, ``site`` or ``goal``."""
+        super().reset(seed=seed)
+        options = dict(options or {})
+        task = {k: options.pop(k) for k in self.task_options if k in options}
+        for name in options:
+            if name not in self.randomizer.ranges:
+                raise UnknownVariantError("reset option", name, [*self.task_options, *sorted(self.randomizer.ranges)])
+        self.values = self.randomizer.sample(self.np_random, options)
+        self.site = str(task.get("site", self._choose_site(self.np_random)))
+        cfg = self.config
+        self.scene = Scene(self.client, self.model, self.values, cfg.physics, cfg.grasp, cfg.tissue)
+        if self.site not in self.scene.tissue.site_local:
+            raise UnknownVariantError("site", self.site, list(self.scene.tissue.site_local))
+        offset = np.array([self.values["site_offset_x_m"], self.values["site_offset_y_m"], 0.0])
+        self._site_nodes, self._site_weights = self.scene.tissue.site_binding(
+            self.scene.tissue.site_local[self.site] + offset
+        )
+        self.scene.settle()
+        self.backend = SimBackend(self.scene.body, self.scene.configuration.q, cfg.jaw_open_rad)
+        self.controller, self.controller_name = make_controller(
+            self.scene.configuration, safety=cfg.safety, control_period_s=cfg.physics.time_step_s
+        )
+        self.controller.reset(self.backend.measure())
+        self._nodes = self.scene.tissue.positions()
+        self._exposure_points = surface_samples(self.scene.hidden_centre, HIDDEN_HALF_EXTENTS_M)
+        self._eye = cfg.camera.eye(self.scene.tissue_origin)
+        given = task.get("goal")
+        self.goal = (
+            np.asarray(given, dtype=float)
+            if given is not None
+            else self._sample_goal(self.np_random, self.site_position())
+        )
+        latency = int(self.values["action_latency_steps"])
+        self._pending: collections.deque[np.ndarray] = collections.deque([np.zeros(5)] * latency)
+        self._force = np.zeros(3)
+        self._strain = 0.0
+        self._holding_steps = 0
+        return self._observation(), self._info(events={})
+
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """Apply one action for one control step (``physics.substeps`` substeps)."""
+        if self.scene is None:
+            raise RuntimeError("call reset() before step()")
+        events: dict[str, Any] = {}
+        safe_action = self._checked_action(action, events)
+        self._pending.append(safe_action)
+        act = self._pending.popleft()
+        cfg = self.config
+        jaw = cfg.jaw_closed_rad if act[4] < 0 else cfg.jaw_open_rad
+        delta = CartesianDelta(act[:3] * cfg.max_step_m, float(act[3]) * cfg.max_yaw_rad, jaw, "base")
+        measured = self._measured()
+        self.controller.set_target(delta, measured)
+        stops, reasons = 0, []
+        interventions: set[str] = set()
+        for _ in range(cfg.physics.substeps):
+            output = self.controller.tick(measured)
+            if output.safety_stop:
+                stops += 1
+                reasons.append(output.reason)
+            interventions.update(output.interventions)
+            self.backend.servo_jp(output.command)
+            self.scene.step_physics()
+            measured = self._measured()
+        previous = self._nodes
+        self._nodes = self.scene.tissue.positions()
+        unstable = self._unstable(previous, self._nodes)
+        if unstable:
+            self._nodes = np.nan_to_num(previous)
+            self.scene.grasp.release()
+        else:
+            self._update_tissue(events)
+        events.update(
+            sim_unstable=unstable,
+            safety_stop=stops > 0,
+            safety_stops=stops,
+            safety_reason=reasons[0] if reasons else "",
+            interventions=tuple(sorted(interventions)),
+        )
+        observation = self._observation()
+        info = self._info(events)
+        reward = float(self.compute_reward(observation["achieved_goal"], observation["desired_goal"], info))
+        return observation, reward, False, unstable, info
+
+    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> np.ndarray:
+        """Sparse reward, batch-capable: 0 where the goal is reached, -1 elsewhere."""
+        return -(~self._reached(np.asarray(achieved_goal), np.asarray(desired_goal))).astype(np.float32)
+
+    def _reached(self, achieved: np.ndarray, desired: np.ndarray) -> np.ndarray:
+        return np.asarray(np.linalg.norm(achieved - desired, axis=-1) <= self.config.success_threshold_m)
+
+    def render(self) -> np.ndarray | None:
+        """The endoscope's RGB image (``render_mode="rgb_array"``)."""
+        if self.render_mode != "rgb_array":
+            return None
+        return self.render_frame().rgb
+
+    def render_frame(self) -> Frame:
+        """RGB, depth and class segmentation of the current scene."""
+        if self.scene is None:
+            raise RuntimeError("call reset() before rendering")
+        s = self.scene
+        bodies = {"tissue": s.tissue.body_id, "hidden_tissue": s.hidden_id, "instrument": s.body.body_id}
+        return render(self.client, self.config.camera, s.tissue_origin, bodies)
+
+    def close(self) -> None:
+        """Disconnect the physics client."""
+        if self.client >= 0 and p.isConnected(self.client):
+            p.disconnect(self.client)
+        self.client = -1
+
+    # ----------------------------------------------------------------- internals
+    def site_position(self) -> np.ndarray:
+        """World position of the episode's grasp site (a material point of the flap) [m]."""
+        return np.asarray(self._site_weights @ self._nodes[self._site_nodes])
+
+    def grasp_position(self) -> np.ndarray:
+        """World position of the point midway along the jaws [m]."""
+        assert self.scene is not None
+        return self.scene.grasp_position()
+
+    def exposure(self) -> float:
+        """Fraction of the hidden tissue the camera sees past the flap."""
+        assert self.scene is not None
+        return exposed_fraction(self._exposure_points, self._eye, self._nodes, self.scene.tissue.triangles)
+
+    def _checked_action(self, action: np.ndarray, events: dict[str, Any]) -> np.ndarray:
+        raw = np.asarray(action, dtype=float).reshape(-1)
+        if raw.shape != (5,) or not np.all(np.isfinite(raw)):
+            events["invalid_action"] = True
+            return np.zeros(5)  # hold still with the jaw open; never reaches the physics
+        clipped = np.clip(raw, -1.0, 1.0)
+        events["action_clipped"] = bool(np.any(clipped != raw))
+        return clipped
+
+    def _measured(self) -> MeasuredState:
+        self.backend.force_n = self._force
+        return self.backend.measure()
+
+    def _unstable(self, previous: np.ndarray, nodes: np.ndarray) -> bool:
+        if not np.all(np.isfinite(nodes)):
+            return True
+        assert self.scene is not None
+        speed = np.abs(nodes - previous).max() / self.config.physics.step_s
+        far = np.abs(nodes - self.scene.tissue_origin).max()
+        return bool(speed > _UNSTABLE_SPEED_M_S or far > _UNSTABLE_DISTANCE_M)
+
+    def _update_tissue(self, events: dict[str, Any]) -> None:
+        assert self.scene is not None
+        s, cfg = self.scene, self.config
+        t = s.tissue
+
+        def signals():
+            return measure(
+                self._nodes, t.edges, t.rest_lengths, t.params.stiffness_n_per_m,
+                s.grasp.nodes, t.node_mass_kg, s.gravity_m_s2, cfg.damage,
+            )  # fmt: skip
+
+        now = signals()
+        grasp = s.grasp.update(self.backend.jaw, s.grasp_position(), self._nodes, float(np.linalg.norm(now.force_n)))
+        if grasp.grasped or grasp.lost:
+            now = signals()
+        self._force, self._strain = now.force_n, now.max_strain
+        events.update(
+            grip_loss=grasp.lost, improper_grasp=grasp.improper, tissue_damage=now.damaged, new_grasp=grasp.grasped
+        )
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        assert self.scene is not None
+        configuration = self.scene.configuration
+        configuration.update(self.backend.q, self.backend.jaw)
+        pose = configuration.measured_pose()
+        tip = pose[:3, 3]
+        site = self.site_position()
+        noise = self.values["observation_noise_m"]
+        if noise > 0:
+            tip = tip + self.np_random.normal(0.0, noise, 3)
+            site = site + self.np_random.normal(0.0, noise, 3)
+        quaternion = np.asarray(pin.Quaternion(pose[:3, :3]).coeffs())  # x, y, z, w
+        observation = np.concatenate(
+            [tip, quaternion, [self.backend.jaw], site, site - tip, self._force, [float(self.scene.grasp.holding)]]
+        )
+        return {
+            "observation": observation.astype(np.float32),
+            "achieved_goal": np.asarray(self._achieved_goal(), dtype=np.float32),
+            "desired_goal": np.asarray(self.goal, dtype=np.float32),
+        }
+
+    def _info(self, events: dict[str, Any]) -> dict[str, Any]:
+        assert self.scene is not None
+        achieved = np.asarray(self._achieved_goal())
+        info: dict[str, Any] = {
+            "is_success": bool(self._reached(achieved, np.asarray(self.goal))),
+            "force_n": self._force.copy(),
+            "force_norm_n": float(np.linalg.norm(self._force)),
+            "max_strain": self._strain,
+            "exposure": self.exposure(),
+            "grasped": self.scene.grasp.holding,
+            "site": self.site,
+            "randomization": dict(self.values),
+            "controller": self.controller_name,
+            "q": self.backend.q.copy(),
+            "insertion_m": float(self.backend.q[2]),
+        }
+        for flag in (
+            "grip_loss", "improper_grasp", "tissue_damage", "sim_unstable", "invalid_action", "action_clipped",
+            "safety_stop", "new_grasp",
+        ):  # fmt: skip
+            info[flag] = bool(events.get(flag, False))
+        info["safety_stops"] = int(events.get("safety_stops", 0))
+        info["safety_reason"] = str(events.get("safety_reason", ""))
+        info["interventions"] = tuple(events.get("interventions", ()))
+        return info

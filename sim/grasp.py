@@ -1,0 +1,131 @@
+"""The grasp: soft-body anchors between the tissue nodes inside the jaws and the jaw.
+
+Closing the jaw near the tissue anchors every node within ``radius_m`` of the grasp point (midway
+along the jaws) to a kinematic jaw proxy that follows the URDF's ``grasp_link`` every substep; opening
+releases them. The proxy exists because anchors attached directly to a link of a kinematically driven
+multibody drift and blow up in PyBullet 3.2.7 (measured), whereas anchors to a base-only body whose
+pose is reset each substep are stable. Closing with no node in reach grasps nothing (an improper grasp);
+a pull beyond ``friction * pinch_force_n`` makes the tissue slip out (grip loss).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import pybullet as p
+
+from psm_control.errors import ConfigurationError
+
+__all__ = ["Grasp", "GraspEvents", "GraspParams"]
+
+
+@dataclass(frozen=True)
+class GraspParams:
+    """Grasp settings.
+
+    Attributes:
+        radius_m: Nodes within this distance of the grasp point are held when the jaw closes [m].
+        friction: Jaw-tissue friction coefficient.
+        pinch_force_n: Jaw pinch force [N]; bowel needs about 3 N of pinch to hold a 5 N pull
+            (Heijnsdijk et al. 2004).
+        close_below_rad: The jaw counts as closed below this opening angle [rad].
+    """
+
+    radius_m: float = 0.010
+    friction: float = 0.5
+    pinch_force_n: float = 4.0
+    close_below_rad: float = 0.15
+
+    @property
+    def capacity_n(self) -> float:
+        """Largest pull the grip holds [N]."""
+        return self.friction * self.pinch_force_n
+
+    def __post_init__(self) -> None:
+        for name in ("radius_m", "friction", "pinch_force_n", "close_below_rad"):
+            if not getattr(self, name) > 0:
+                raise ConfigurationError(name, getattr(self, name), "a positive number")
+
+
+class GraspEvents(NamedTuple):
+    """What changed in one update: a new grasp, an improper grasp, a release or a grip loss."""
+
+    grasped: bool = False
+    improper: bool = False
+    released: bool = False
+    lost: bool = False
+
+
+class Grasp:
+    """The jaw's hold on the tissue in one physics client.
+
+    Args:
+        client: PyBullet physics client id.
+        tissue_body: The soft body's id.
+        params: Grasp settings.
+    """
+
+    def __init__(self, client: int, tissue_body: int, params: GraspParams) -> None:
+        self.client = client
+        self.tissue_body = tissue_body
+        self.params = params
+        shape = p.createCollisionShape(p.GEOM_SPHERE, radius=0.001, physicsClientId=client)
+        self.proxy = p.createMultiBody(0.0, shape, physicsClientId=client)
+        p.setCollisionFilterGroupMask(self.proxy, -1, 0, 0, physicsClientId=client)
+        self.nodes = np.zeros(0, dtype=int)
+        self._anchors: list[int] = []
+        self._armed = True  # a closed jaw must reopen before it can grasp again
+
+    @property
+    def holding(self) -> bool:
+        """Whether the jaw holds tissue."""
+        return len(self.nodes) > 0
+
+    def follow(self, grasp_position: np.ndarray) -> None:
+        """Move the jaw proxy to the grasp point (call every substep)."""
+        p.resetBasePositionAndOrientation(
+            self.proxy, grasp_position.tolist(), [0.0, 0.0, 0.0, 1.0], physicsClientId=self.client
+        )
+
+    def update(self, jaw_rad: float, grasp_position: np.ndarray, nodes: np.ndarray, pull_n: float) -> GraspEvents:
+        """Grasp, release or slip after a step.
+
+        Args:
+            jaw_rad: Measured jaw opening [rad].
+            grasp_position: World position of the grasp point [m].
+            nodes: Tissue node positions (N, 3) [m].
+            pull_n: Magnitude of the force the tissue exerts on the grasp [N].
+        """
+        closed = jaw_rad < self.params.close_below_rad
+        if not closed:
+            released = self.holding
+            self.release()
+            self._armed = True
+            return GraspEvents(released=released)
+        if self.holding:
+            if pull_n > self.params.capacity_n:
+                self.release()
+                return GraspEvents(lost=True)
+            return GraspEvents()
+        if not self._armed:
+            return GraspEvents()
+        self._armed = False
+        reach = np.flatnonzero(np.linalg.norm(nodes - grasp_position, axis=1) < self.params.radius_m)
+        if len(reach) == 0:
+            return GraspEvents(improper=True)
+        self.follow(grasp_position)
+        self._anchors = [
+            p.createSoftBodyAnchor(self.tissue_body, int(node), self.proxy, -1, physicsClientId=self.client)
+            for node in reach
+        ]
+        self.nodes = reach
+        return GraspEvents(grasped=True)
+
+    def release(self) -> None:
+        """Let go of every held node."""
+        for anchor in self._anchors:
+            p.removeConstraint(anchor, physicsClientId=self.client)
+        self._anchors = []
+        self.nodes = np.zeros(0, dtype=int)

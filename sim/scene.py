@@ -1,0 +1,147 @@
+"""The retraction scene in one physics client: table, hidden tissue, flap, PSM and jaw.
+
+SI units, z up, gravity on. The table top is the ``z = 0`` plane; the hidden tissue is a rigid box
+(with collision) under the front half of the flap; the flap's three pinned edges sit just above it.
+The PSM's RCM is at a port above the flap with the tool pointing down, so the home insertion puts
+the tool tip about 2 cm above the flap. The world is rebuilt on every reset, because PyBullet cannot
+reset a soft body's nodes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pybullet as p
+
+from psm_control.errors import ConfigurationError
+from psm_control.robot import PsmConfiguration, PsmModel
+from psm_control.urdf import GRASP_FRAME
+from sim.grasp import Grasp, GraspParams
+from sim.psm_body import PsmBody
+from sim.tissue import Tissue, TissueParams
+
+__all__ = ["HIDDEN_HALF_EXTENTS_M", "PhysicsParams", "Scene"]
+
+#: Half extents of the hidden tissue box (x, y, z) [m].
+HIDDEN_HALF_EXTENTS_M = np.array([0.022, 0.015, 0.004])
+_HIDDEN_CENTRE_Y_M = 0.018  # under the free-edge half of the flap
+_FLAP_HEIGHT_M = 2 * HIDDEN_HALF_EXTENTS_M[2] + 0.004
+_RCM_ABOVE_FLAP_M = 0.135
+
+
+@dataclass(frozen=True)
+class PhysicsParams:
+    """Physics stepping.
+
+    Attributes:
+        time_step_s: Physics substep [s]. PyBullet's mass-spring cloth resting on a rigid body is
+            stable at 1/240 s and not at 1/120 s (measured for the default flap).
+        substeps: Substeps per environment step (12 x 1/240 s = 0.05 s per step).
+        solver_iterations: Constraint solver iterations (the paper's code used 50).
+        settle_s: Time the flap settles under gravity before an episode starts [s].
+    """
+
+    time_step_s: float = 1.0 / 240.0
+    substeps: int = 12
+    solver_iterations: int = 10
+    settle_s: float = 0.25
+
+    def __post_init__(self) -> None:
+        if not 0 < self.time_step_s <= 0.01:
+            raise ConfigurationError("time_step_s", self.time_step_s, "a substep in (0, 0.01] s")
+        if self.substeps < 1 or self.solver_iterations < 1:
+            raise ConfigurationError("substeps", self.substeps, "at least one substep and one solver iteration")
+
+    @property
+    def step_s(self) -> float:
+        """Duration of one environment step [s]."""
+        return self.time_step_s * self.substeps
+
+
+class Scene:
+    """Builds the scene for one episode in an existing physics client.
+
+    Args:
+        client: PyBullet physics client id (reset here with the deformable world).
+        model: The PSM model.
+        values: The episode's randomization values (see :mod:`sim.randomization`).
+        physics: Physics stepping.
+        grasp: Grasp settings (the friction is taken from ``values``).
+        tissue: Base tissue settings (stiffness, damping, mass, size, colour from ``values``).
+    """
+
+    def __init__(
+        self,
+        client: int,
+        model: PsmModel,
+        values: Mapping[str, float],
+        physics: PhysicsParams,
+        grasp: GraspParams,
+        tissue: TissueParams,
+    ) -> None:
+        self.client = client
+        self.physics = physics
+        p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD, physicsClientId=client)
+        # Gravity after the reset: the paper's code set it before a second reset, which cleared it.
+        self.gravity_m_s2 = np.array([0.0, 0.0, -values["gravity_m_s2"]])
+        p.setGravity(*self.gravity_m_s2, physicsClientId=client)
+        p.setPhysicsEngineParameter(
+            fixedTimeStep=physics.time_step_s,
+            numSubSteps=0,
+            numSolverIterations=physics.solver_iterations,
+            physicsClientId=client,
+        )
+        self.tissue_origin = np.array([values["tissue_x_m"], values["tissue_y_m"], _FLAP_HEIGHT_M])
+        self.table_id = self._box([0.15, 0.15, 0.01], [0.0, 0.0, -0.01], (0.55, 0.55, 0.6, 1.0))
+        self.hidden_centre = self.tissue_origin + np.array([0.0, _HIDDEN_CENTRE_Y_M, 0.0])
+        self.hidden_centre[2] = HIDDEN_HALF_EXTENTS_M[2]
+        self.hidden_id = self._box(HIDDEN_HALF_EXTENTS_M, self.hidden_centre, (0.9, 0.85, 0.2, 1.0))
+        self.tissue_params = TissueParams(
+            size_m=values["tissue_size_m"],
+            resolution=tissue.resolution,
+            mass_kg=values["tissue_mass_kg"],
+            stiffness_n_per_m=values["tissue_stiffness_n_per_m"],
+            damping=values["tissue_damping"],
+            friction=tissue.friction,
+            rgba=(values["tissue_color_r"], values["tissue_color_g"], values["tissue_color_b"], 1.0),
+            site_inset_m=tissue.site_inset_m,
+            site_spacing_m=tissue.site_spacing_m,
+        )
+        self.tissue = Tissue(client, self.tissue_params, self.tissue_origin)
+        self.rcm_position = self.tissue_origin + np.array(
+            [values["rcm_x_m"], 0.02 + values["rcm_y_m"], _RCM_ABOVE_FLAP_M + values["rcm_z_m"]]
+        )
+        transform = np.eye(4)
+        transform[:3, 3] = self.rcm_position
+        self.configuration = PsmConfiguration(model, model.home(), jaw=0.6, base_frame=transform)
+        self.body = PsmBody(client, model, self.rcm_position)
+        for link in range(-1, p.getNumJoints(self.body.body_id, physicsClientId=client)):
+            # The arm is position-controlled and touches the tissue only through the grasp.
+            p.setCollisionFilterGroupMask(self.body.body_id, link, 0, 0, physicsClientId=client)
+        self.grasp = Grasp(client, self.tissue.body_id, replace(grasp, friction=values["grip_friction"]))
+
+    def _box(
+        self, half_extents: np.ndarray | list[float], centre: np.ndarray | list[float], rgba: tuple[float, ...]
+    ) -> int:
+        half = [float(v) for v in half_extents]
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
+        visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=list(rgba), physicsClientId=self.client)
+        position = [float(v) for v in centre]
+        return int(p.createMultiBody(0.0, shape, visual, basePosition=position, physicsClientId=self.client))
+
+    def grasp_position(self) -> np.ndarray:
+        """World position of the point midway along the jaws [m], from the arm's measured joints."""
+        return self.body.link_pose(GRASP_FRAME)[:3, 3]
+
+    def step_physics(self) -> None:
+        """One physics substep with the jaw proxy on the grasp point."""
+        if self.grasp.holding:
+            self.grasp.follow(self.grasp_position())
+        p.stepSimulation(physicsClientId=self.client)
+
+    def settle(self) -> None:
+        """Let the flap come to rest under gravity."""
+        for _ in range(round(self.physics.settle_s / self.physics.time_step_s)):
+            p.stepSimulation(physicsClientId=self.client)

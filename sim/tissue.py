@@ -1,0 +1,165 @@
+"""The soft tissue flap: a procedurally meshed PyBullet deformable pinned on three edges.
+
+The flap is a mass-spring cloth (``useMassSpring``), not an FEM volume: a retracted flap is thin, a
+cloth has one layer of nodes (tens, not hundreds, for the same area), and every spring's force is
+``k (length - rest)`` along the spring, so the retraction force on the grasp can be computed exactly
+from the node positions (see :mod:`sim.mechanics`). PyBullet's deformable solver treats the elastic
+springs explicitly, so the stable time step shrinks as ``sqrt(node mass / k)``: a coarse mesh with
+heavier nodes is both faster and more stable than the 15 x 15 cloth of the paper's code.
+
+Layout in the tissue's own frame: the flap spans ``[-L/2, L/2]^2`` in x and y; the edges at
+``y = -L/2`` (back) and ``x = +-L/2`` (sides) are pinned, the edge at ``y = +L/2`` is the free flap.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import tempfile
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+from psm_control.errors import ConfigurationError
+
+__all__ = ["SITE_NAMES", "Tissue", "TissueParams", "grid_mesh"]
+
+#: Grasp sites along the free edge, as in the paper's Task III.
+SITE_NAMES = ("centre", "left", "right")
+
+
+@dataclass(frozen=True)
+class TissueParams:
+    """Physical and visual settings of the flap.
+
+    Attributes:
+        size_m: Side length of the square flap [m].
+        resolution: Nodes per side (>= 4); the default 7 gives a 13 mm node spacing at 8 cm.
+        mass_kg: Total mass [kg] (8 x 8 x 0.3 cm of soft tissue is about 20 g).
+        stiffness_n_per_m: Elastic stiffness of every spring [N/m].
+        damping: Spring damping stiffness [N s/m].
+        friction: Contact friction of the flap against rigid bodies.
+        rgba: Display colour.
+        site_inset_m: Distance of the grasp sites in from the free edge [m].
+        site_spacing_m: Distance of the left/right sites from the centre site [m].
+    """
+
+    size_m: float = 0.08
+    resolution: int = 7
+    mass_kg: float = 0.02
+    stiffness_n_per_m: float = 20.0
+    damping: float = 0.05
+    friction: float = 0.5
+    rgba: tuple[float, float, float, float] = (0.85, 0.42, 0.42, 1.0)
+    site_inset_m: float = 0.004
+    site_spacing_m: float = 0.022
+
+    def __post_init__(self) -> None:
+        if self.resolution < 4:
+            raise ConfigurationError("resolution", self.resolution, "an integer >= 4 nodes per side")
+        for name in ("size_m", "mass_kg", "stiffness_n_per_m"):
+            if not getattr(self, name) > 0:
+                raise ConfigurationError(name, getattr(self, name), "a positive number")
+        if self.damping < 0:
+            raise ConfigurationError("damping", self.damping, "a non-negative number")
+
+
+def grid_mesh(resolution: int, size_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (N, 3) and counter-clockwise triangles (T, 3) of a square grid in the z = 0 plane."""
+    xs = np.linspace(-size_m / 2.0, size_m / 2.0, resolution)
+    gx, gy = np.meshgrid(xs, xs)
+    vertices = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    triangles = []
+    for j in range(resolution - 1):
+        for i in range(resolution - 1):
+            a = j * resolution + i
+            b, c = a + 1, a + resolution
+            triangles += [(a, b, c + 1), (a, c + 1, c)]
+    return vertices, np.array(triangles, dtype=int)
+
+
+@functools.lru_cache(maxsize=32)
+def _obj_file(resolution: int, size_m: float) -> str:
+    vertices, triangles = grid_mesh(resolution, size_m)
+    lines = [f"v {x:.7f} {y:.7f} {z:.7f}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
+    handle, path = tempfile.mkstemp(prefix=f"flap_{resolution}_", suffix=".obj")
+    with os.fdopen(handle, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    return path
+
+
+class Tissue:
+    """The flap loaded into one physics client (which must use the deformable world).
+
+    Args:
+        client: PyBullet physics client id.
+        params: The flap's settings.
+        origin: World position of the flap's centre [m].
+        pin_edges: Pin the back and side edges to the world (False leaves the flap free, for tests).
+    """
+
+    def __init__(self, client: int, params: TissueParams, origin: np.ndarray, *, pin_edges: bool = True) -> None:
+        self.client = client
+        self.params = params
+        self.origin = np.asarray(origin, dtype=float)
+        vertices, self.triangles = grid_mesh(params.resolution, params.size_m)
+        self.rest_positions = vertices + self.origin
+        self.body_id = p.loadSoftBody(
+            _obj_file(params.resolution, params.size_m),
+            basePosition=self.origin.tolist(),
+            mass=params.mass_kg,
+            useMassSpring=1,
+            useBendingSprings=0,
+            useNeoHookean=0,
+            springElasticStiffness=params.stiffness_n_per_m,
+            springDampingStiffness=params.damping,
+            springDampingAllDirections=1,
+            useSelfCollision=0,
+            frictionCoeff=params.friction,
+            collisionMargin=0.001,
+            physicsClientId=client,
+        )
+        p.changeVisualShape(self.body_id, -1, rgbaColor=list(params.rgba), physicsClientId=client)
+        pairs = np.concatenate([self.triangles[:, [0, 1]], self.triangles[:, [1, 2]], self.triangles[:, [2, 0]]])
+        self.edges = np.unique(np.sort(pairs, axis=1), axis=0)
+        self.rest_lengths = np.linalg.norm(vertices[self.edges[:, 1]] - vertices[self.edges[:, 0]], axis=1)
+        self.node_mass_kg = self._lumped_masses(vertices)
+        n = params.resolution
+        rows, cols = np.divmod(np.arange(n * n), n)
+        self.pinned = np.flatnonzero((rows == 0) | (cols == 0) | (cols == n - 1)) if pin_edges else np.zeros(0, int)
+        for node in self.pinned:
+            p.createSoftBodyAnchor(self.body_id, int(node), -1, -1, physicsClientId=client)
+        half = params.size_m / 2.0
+        edge_y = half - params.site_inset_m
+        self.site_local = {
+            "centre": np.array([0.0, edge_y, 0.0]),
+            "left": np.array([-params.site_spacing_m, edge_y, 0.0]),
+            "right": np.array([params.site_spacing_m, edge_y, 0.0]),
+        }
+
+    def _lumped_masses(self, vertices: np.ndarray) -> np.ndarray:
+        """Node masses by a third of the adjacent triangle areas, as Bullet's ``setTotalMass(m, true)``."""
+        a, b, c = (vertices[self.triangles[:, k]] for k in range(3))
+        areas = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        masses = np.zeros(len(vertices))
+        for k in range(3):
+            np.add.at(masses, self.triangles[:, k], areas / 3.0)
+        return masses * (self.params.mass_kg / masses.sum())
+
+    def positions(self) -> np.ndarray:
+        """Current node positions (N, 3) in the world [m]."""
+        _, nodes = p.getMeshData(self.body_id, -1, flags=p.MESH_DATA_SIMULATION_MESH, physicsClientId=self.client)
+        return np.asarray(nodes, dtype=float)
+
+    def site_binding(self, local_point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The triangle holding a material point of the flat flap, and its barycentric weights."""
+        rest = self.rest_positions - self.origin
+        for triangle in self.triangles:
+            a, b, c = rest[triangle, :2]
+            matrix = np.column_stack([b - a, c - a])
+            u, v = np.linalg.solve(matrix, local_point[:2] - a)
+            if u >= -1e-9 and v >= -1e-9 and u + v <= 1 + 1e-9:
+                return triangle.copy(), np.array([1.0 - u - v, u, v])
+        raise ConfigurationError("site", local_point.tolist(), "a point inside the flap")
