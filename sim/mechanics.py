@@ -26,11 +26,12 @@ class DamageLimits:
     Attributes:
         max_force_n: Retraction force limit [N]; 5 N is a conservative figure for delicate tissue
             (suture traction tolerated before tearing: 1.25-11.4 N, Rodrigues et al. 2012).
-        max_strain: Largest spring strain (length / rest - 1) the tissue tolerates.
+        max_strain: Largest spring strain (length / rest - 1) the tissue tolerates; a point grasp on a
+            13 mm mesh concentrates strain in the few springs at the jaw, hence the generous default.
     """
 
     max_force_n: float = 5.0
-    max_strain: float = 0.6
+    max_strain: float = 1.0
 
     def __post_init__(self) -> None:
         if not self.max_force_n > 0:

@@ -1,0 +1,87 @@
+"""The scripted expert: the paper's rule-based demonstrator (approach, grasp, retract, hold).
+
+It reads privileged simulator state (the site and the jaw's grasp point) and returns actions in the
+environment's action box, so its demonstrations replay through the same control chain as a policy's.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from sim.envs.base import TissueRetractEnv
+from sim.envs.expose import ExposeEnv
+
+__all__ = ["ScriptedExpert"]
+
+_HOVER_M = 0.008
+_NEAR_M = 0.0015
+_RETRACT_OFFSET_M = np.array([0.0, -0.02, 0.035])  # up and back towards the pinned edge (Expose task)
+
+
+class ScriptedExpert:
+    """Approach above the site, descend, close the jaw, carry the site to the goal and hold it.
+
+    Args:
+        env: The environment (wrappers are looked through).
+    """
+
+    def __init__(self, env: Any) -> None:
+        self.env: TissueRetractEnv = env.unwrapped
+        self.phase = "approach"
+        self._waited = 0
+
+    def reset(self) -> None:
+        """Start a new episode."""
+        self.phase = "approach"
+        self._waited = 0
+
+    def __call__(self, observation: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """The action for the current state (the observation is not needed: the expert is privileged)."""
+        env = self.env
+        grasp, site = env.grasp_position(), env.site_position()
+        holding = env.scene is not None and env.scene.grasp.holding
+        if self.phase in ("retract", "hold") and not holding:
+            self.phase = "approach"  # the grip slipped: start again
+        if self.phase == "approach":
+            target = site + np.array([0.0, 0.0, _HOVER_M])
+            if np.linalg.norm(target - grasp) < _NEAR_M:
+                self.phase = "descend"
+            return self._move(target - grasp, jaw=1.0)
+        if self.phase == "descend":
+            if np.linalg.norm(site - grasp) < _NEAR_M:
+                self.phase, self._waited = "close", 0
+                return self._move(site - grasp, jaw=-1.0)
+            return self._move(site - grasp, jaw=1.0)
+        if self.phase == "close":
+            self._waited += 1
+            if holding:
+                self.phase = "retract"
+            elif self._waited > len(self.env._pending) + 1:
+                self.phase, self._waited = "reopen", 0
+                return self._move(np.zeros(3), jaw=1.0)
+            else:
+                return self._move(site - grasp, jaw=-1.0)
+        if self.phase == "reopen":
+            self._waited += 1
+            if self._waited > len(self.env._pending):
+                self.phase, self._waited = "approach", 0
+            return self._move(np.zeros(3), jaw=1.0)
+        return self._move(self._retract_target(site) - site, jaw=-1.0)
+
+    def _retract_target(self, site: np.ndarray) -> np.ndarray:
+        env = self.env
+        if isinstance(env, ExposeEnv):
+            assert env.scene is not None
+            start = env.scene.tissue.rest_positions[env._site_nodes].T @ env._site_weights
+            return np.asarray(start + _RETRACT_OFFSET_M)
+        return np.asarray(env.goal, dtype=float)
+
+    def _move(self, delta_m: np.ndarray, jaw: float) -> np.ndarray:
+        step = self.env.config.max_step_m
+        in_flight = sum((pending[:3] * step for pending in self.env._pending), np.zeros(3))  # action latency
+        action = np.zeros(5, dtype=np.float32)
+        action[:3] = np.clip((delta_m - in_flight) / step, -1.0, 1.0)
+        action[4] = jaw
+        return action
