@@ -11,9 +11,11 @@ from collections.abc import Iterable
 
 __all__ = [
     "ConfigurationError",
+    "InfeasibleProblemError",
     "JointLimitError",
     "JointVectorError",
     "NotBuiltError",
+    "SafetyStopError",
     "TissueRetractError",
     "UnknownVariantError",
 ]
@@ -81,3 +83,31 @@ class JointLimitError(JointVectorError):
 
 class NotBuiltError(TissueRetractError):
     """A command exists in the interface but is not implemented in this version."""
+
+
+class InfeasibleProblemError(TissueRetractError):
+    """A quadratic program of the control chain has no acceptable solution.
+
+    Attributes:
+        stage: Which stage built the problem (``"ik"``, ``"safety_filter"``).
+        status: The solver's status text.
+        problem: The ``qpsolvers.Problem`` that failed, so it can be inspected or re-solved offline.
+    """
+
+    def __init__(self, stage: str, status: str, problem: object = None) -> None:
+        self.stage = stage
+        self.status = status
+        self.problem = problem
+        super().__init__(f"{stage} QP has no acceptable solution (solver status: {status})")
+
+
+class SafetyStopError(TissueRetractError):
+    """A safety stage refused a command; the reason names the rule and the offending value.
+
+    Attributes:
+        reason: Human-readable cause, as recorded in the safety log.
+    """
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+        super().__init__(reason)

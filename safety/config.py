@@ -1,0 +1,282 @@
+"""One validated configuration for the whole safety layer, loadable from TOML or YAML.
+
+Joint velocity and acceleration limits default to the dVRK's ``move_jp`` trajectory limits (the dVRK
+sets no hard servo velocity limit); the minimum insertion is the dVRK's 45 mm SafeDistanceFromRCM plus
+its 2 mm buffer; the retraction-force limit comes from a per-tissue preset (table below, sources
+in ``../shared/facts/tissue-forces.md``) unless given explicitly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psm_control.errors import ConfigurationError, UnknownVariantError
+from psm_control.spec import PsmSpec, psm_spec
+
+__all__ = ["FORCE_PRESETS", "ForcePreset", "SafetyConfig", "load_safety_config"]
+
+
+@dataclass(frozen=True)
+class ForcePreset:
+    """A retraction-force limit for one kind of tissue, with where the number comes from."""
+
+    force_limit_n: float
+    source: str
+
+
+#: Retraction-force limits [N] per tissue. Each stays at or below the published tolerance.
+FORCE_PRESETS: dict[str, ForcePreset] = {
+    "generic": ForcePreset(
+        3.0, "conservative 1-5 N range for delicate tissue; below liver's 3.38 N max grasp (MITAT 2022)"
+    ),
+    "nerve": ForcePreset(0.4, "nervous tissue about 0.4 N (Golahmadi et al., 2021 systematic review)"),
+    "fallopian_tube": ForcePreset(1.25, "suture traction tolerated 1.25 N (Rodrigues et al., Surg Endosc 2012)"),
+    "liver": ForcePreset(1.75, "mean grasping force 1.75 N, damage grows with force (MITAT 2022)"),
+    "bowel": ForcePreset(
+        5.0, "pulled at 5 N without slip (Heijnsdijk et al., Surg Endosc 2004); damage >= 20 N (Surg Endosc 2018)"
+    ),
+    "ureter": ForcePreset(6.0, "6-8 N safety threshold, lower end (urology scoping review, 2025)"),
+    "fascia": ForcePreset(11.43, "suture traction tolerated 11.43 N (Rodrigues et al., Surg Endosc 2012)"),
+}
+
+_DVRK_MIN_INSERTION_M = 0.045
+
+
+def _positive(name: str, value: float, upper: float = math.inf) -> None:
+    if not (isinstance(value, int | float) and math.isfinite(value) and 0.0 < value <= upper):
+        raise ConfigurationError(name, value, f"a finite number in (0, {upper:g}]")
+
+
+def _vector(name: str, value: object, length: int, *, positive: bool = False) -> None:
+    array = np.asarray(value, dtype=float) if not isinstance(value, str) else np.array([np.nan])
+    if array.shape != (length,) or not np.all(np.isfinite(array)):
+        raise ConfigurationError(name, value, f"{length} finite numbers")
+    if positive and not np.all(array > 0.0):
+        raise ConfigurationError(name, value, f"{length} numbers > 0")
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Every limit and setting of the control chain's safety layer.
+
+    Attributes:
+        arm: PSM generation (``"classic"`` or ``"si"``); joint limits come from its specification.
+        tool: Instrument part number (None: the arm's large needle driver).
+        control_rate_hz: Rate of :meth:`ControlChain.tick` [Hz], 100 to 5000.
+        horizon_s: Look-ahead over which one tick's goal step may move each joint at its velocity limit [s].
+        velocity_limit: Per-joint speed limits (6,) [rad/s, m/s]; None: the dVRK's move_jp limits.
+        acceleration_limit: Per-joint acceleration limits (6,); None: the dVRK's move_jp limits.
+        jerk_limit: Per-joint jerk limits (6,); None: ``jerk_per_acceleration`` times the acceleration limits.
+        jerk_per_acceleration: Jerk limit as a multiple of the acceleration limit [1/s].
+        position_margin: Distance kept from each joint's position limits (6,) [rad, m].
+        min_insertion_m: Lowest insertion past the RCM [m]; at least the dVRK's 0.045.
+        workspace_min_m: Lower corner of the tool-tip box in the base frame (3,) [m].
+        workspace_max_m: Upper corner of the tool-tip box in the base frame (3,) [m].
+        workspace_tolerance_m: How far outside the box the verifier lets a command go [m].
+        cbf_gamma: Control-barrier rate in (0, 1]: the fraction of the distance to a face one step may use.
+        tissue: Name of the force preset (see :data:`FORCE_PRESETS`).
+        force_limit_n: Retraction-force limit [N]; None: the tissue preset's value.
+        stiffness_prior_n_per_m: Initial tissue stiffness estimate (deliberately stiff: conservative) [N/m].
+        stiffness_min_n_per_m: Lowest stiffness the force limit will ever assume [N/m].
+        stiffness_max_n_per_m: Highest stiffness estimate accepted [N/m].
+        stiffness_forgetting: RLS forgetting factor in (0.5, 1].
+        deadman_timeout_s: Measurements older than this stop the chain [s].
+        max_translation_m: Largest accepted translation in one policy target [m]; larger is refused.
+        max_yaw_rad: Largest accepted yaw in one policy target [rad].
+        solver_eps: OSQP absolute and relative tolerance.
+        solver_max_iter: OSQP iteration cap.
+        hard_tolerance: Violation of a hard constraint after the solve above which the tick stops.
+        slack_penalty: Linear and quadratic penalty on the slack of soft constraints.
+    """
+
+    arm: str = "classic"
+    tool: str | None = None
+    control_rate_hz: float = 1000.0
+    horizon_s: float = 0.05
+    velocity_limit: tuple[float, ...] | None = None
+    acceleration_limit: tuple[float, ...] | None = None
+    jerk_limit: tuple[float, ...] | None = None
+    jerk_per_acceleration: float = 20.0
+    position_margin: tuple[float, ...] = (0.02, 0.02, 0.002, 0.05, 0.02, 0.02)
+    min_insertion_m: float = 0.047
+    workspace_min_m: tuple[float, float, float] = (-0.07, -0.07, -0.20)
+    workspace_max_m: tuple[float, float, float] = (0.07, 0.07, -0.05)
+    workspace_tolerance_m: float = 0.001
+    cbf_gamma: float = 0.5
+    tissue: str = "generic"
+    force_limit_n: float | None = None
+    stiffness_prior_n_per_m: float = 400.0
+    stiffness_min_n_per_m: float = 50.0
+    stiffness_max_n_per_m: float = 5000.0
+    stiffness_forgetting: float = 0.98
+    deadman_timeout_s: float = 0.05
+    max_translation_m: float = 0.05
+    max_yaw_rad: float = 0.5
+    solver_eps: float = 1e-5
+    solver_max_iter: int = 4000
+    hard_tolerance: float = 1e-6
+    slack_penalty: float = 1e3
+    _spec: PsmSpec = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_spec", psm_spec(self.arm, self.tool))
+        self.validate()
+
+    @property
+    def spec(self) -> PsmSpec:
+        """The PSM variant the limits apply to."""
+        return self._spec
+
+    @property
+    def control_period_s(self) -> float:
+        """Period of one control tick [s]."""
+        return 1.0 / self.control_rate_hz
+
+    @property
+    def effective_force_limit_n(self) -> float:
+        """The retraction-force limit in force: explicit, or the tissue preset's."""
+        return self.force_limit_n if self.force_limit_n is not None else FORCE_PRESETS[self.tissue].force_limit_n
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """Per-joint velocity limits (6,)."""
+        return np.array(self.velocity_limit) if self.velocity_limit is not None else self._spec.velocity_limit
+
+    @property
+    def acceleration(self) -> np.ndarray:
+        """Per-joint acceleration limits (6,)."""
+        if self.acceleration_limit is not None:
+            return np.array(self.acceleration_limit)
+        return self._spec.acceleration_limit
+
+    @property
+    def jerk(self) -> np.ndarray:
+        """Per-joint jerk limits (6,)."""
+        if self.jerk_limit is not None:
+            return np.array(self.jerk_limit)
+        return self.jerk_per_acceleration * self.acceleration
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Hard lower joint limits (6,), including the minimum insertion."""
+        lower = self._spec.lower.copy()
+        lower[2] = max(lower[2], self.min_insertion_m)
+        return lower
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Hard upper joint limits (6,)."""
+        return self._spec.upper.copy()
+
+    def validate(self) -> None:
+        """Raise :class:`ConfigurationError` naming the first field outside its allowed range."""
+        dof = self._spec.dof
+        if not (isinstance(self.control_rate_hz, int | float) and 100.0 <= self.control_rate_hz <= 5000.0):
+            raise ConfigurationError("control_rate_hz", self.control_rate_hz, "a number in [100, 5000]")
+        _positive("horizon_s", self.horizon_s, 1.0)
+        if self.horizon_s < self.control_period_s:
+            raise ConfigurationError(
+                "horizon_s", self.horizon_s, f"at least one control period ({self.control_period_s:g} s)"
+            )
+        for name in ("velocity_limit", "acceleration_limit", "jerk_limit"):
+            value = getattr(self, name)
+            if value is not None:
+                _vector(name, value, dof, positive=True)
+        _positive("jerk_per_acceleration", self.jerk_per_acceleration, 1e4)
+        _vector("position_margin", self.position_margin, dof)
+        margin = np.asarray(self.position_margin)
+        span = self._spec.upper - self._spec.lower
+        if np.any(margin < 0.0) or np.any(2 * margin >= span):
+            raise ConfigurationError("position_margin", self.position_margin, f">= 0 and below half of {span.round(3)}")
+        upper_insertion = self._spec.joints[2].upper
+        if not (_DVRK_MIN_INSERTION_M <= self.min_insertion_m < upper_insertion):
+            raise ConfigurationError(
+                "min_insertion_m", self.min_insertion_m, f"[{_DVRK_MIN_INSERTION_M}, {upper_insertion})"
+            )
+        _vector("workspace_min_m", self.workspace_min_m, 3)
+        _vector("workspace_max_m", self.workspace_max_m, 3)
+        if not np.all(np.asarray(self.workspace_min_m) < np.asarray(self.workspace_max_m)):
+            raise ConfigurationError(
+                "workspace_min_m", self.workspace_min_m, f"below workspace_max_m={self.workspace_max_m}"
+            )
+        _positive("workspace_tolerance_m", self.workspace_tolerance_m, 0.01)
+        _positive("cbf_gamma", self.cbf_gamma, 1.0)
+        if self.tissue not in FORCE_PRESETS:
+            raise UnknownVariantError("tissue", self.tissue, FORCE_PRESETS)
+        if self.force_limit_n is not None:
+            _positive("force_limit_n", self.force_limit_n, 50.0)
+        _positive("stiffness_min_n_per_m", self.stiffness_min_n_per_m, 1e5)
+        _positive("stiffness_max_n_per_m", self.stiffness_max_n_per_m, 1e5)
+        if not self.stiffness_min_n_per_m <= self.stiffness_prior_n_per_m <= self.stiffness_max_n_per_m:
+            raise ConfigurationError(
+                "stiffness_prior_n_per_m",
+                self.stiffness_prior_n_per_m,
+                f"[{self.stiffness_min_n_per_m}, {self.stiffness_max_n_per_m}] (stiffness_min/max_n_per_m)",
+            )
+        if not (isinstance(self.stiffness_forgetting, int | float) and 0.5 < self.stiffness_forgetting <= 1.0):
+            raise ConfigurationError("stiffness_forgetting", self.stiffness_forgetting, "a number in (0.5, 1]")
+        _positive("deadman_timeout_s", self.deadman_timeout_s, 1.0)
+        _positive("max_translation_m", self.max_translation_m, 0.2)
+        _positive("max_yaw_rad", self.max_yaw_rad, math.pi)
+        _positive("solver_eps", self.solver_eps, 1e-3)
+        if not (isinstance(self.solver_max_iter, int) and 10 <= self.solver_max_iter <= 100_000):
+            raise ConfigurationError("solver_max_iter", self.solver_max_iter, "an integer in [10, 100000]")
+        _positive("hard_tolerance", self.hard_tolerance, 1e-3)
+        _positive("slack_penalty", self.slack_penalty, 1e9)
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any]) -> SafetyConfig:
+        """Build from a mapping (as read from TOML/YAML), refusing unknown keys."""
+        known = {f.name for f in dataclasses.fields(cls) if f.init}
+        for key in data:
+            if key not in known:
+                raise ConfigurationError(key, data[key], "a known setting: " + ", ".join(sorted(known)))
+        values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        return cls(**values)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as plain values (what a config file would hold)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
+
+
+def load_safety_config(path: str | Path) -> SafetyConfig:
+    """Load a :class:`SafetyConfig` from a ``.toml`` or ``.yaml``/``.yml`` file.
+
+    The file holds the settings at top level or under a ``[safety]`` table.
+
+    Raises:
+        ConfigurationError: Unknown key, unreadable file or a value outside its allowed range.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ConfigurationError("config", str(path), "a readable file") from e
+    suffix = path.suffix.lower()
+    if suffix == ".toml":
+        try:
+            data: Any = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as e:
+            raise ConfigurationError("config", str(path), f"valid TOML ({e})") from e
+    elif suffix in (".yaml", ".yml"):
+        import yaml
+
+        try:
+            data = yaml.safe_load(text) or {}
+        except yaml.YAMLError as e:
+            raise ConfigurationError("config", str(path), f"valid YAML ({e})") from e
+    else:
+        raise ConfigurationError("config", str(path), "a .toml, .yaml or .yml file")
+    if not isinstance(data, dict):
+        raise ConfigurationError("config", str(path), "a mapping of settings")
+    if "safety" in data and isinstance(data["safety"], dict):
+        data = data["safety"]
+    return SafetyConfig.from_mapping(data)

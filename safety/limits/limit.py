@@ -1,0 +1,90 @@
+"""The abstract safety limit: one rule, as linear inequality rows on the joint displacement.
+
+In the manner of pink/mink's ``Limit.compute_qp_inequalities``: each rule looks at the current
+:class:`FilterState` and returns ``(G, h)`` such that a safe joint displacement ``dq`` over the tick's
+horizon satisfies ``G @ dq <= h``. Every limit returns the same number of rows every tick (unused rows are
+``0 <= +inf``), so the safety filter can keep one solver workspace with a fixed sparsity pattern.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = ["FilterState", "Limit", "LimitReport"]
+
+#: Right-hand side of an unused row.
+INACTIVE = np.inf
+
+
+class FilterState(NamedTuple):
+    """What the limits need to know about the robot at one tick.
+
+    Attributes:
+        q: Commanded joint positions (6,) the step starts from.
+        qd: Commanded joint velocities (6,).
+        tool_position_m: Tool-tip position in the base frame (3,) [m].
+        tool_jacobian: Linear Jacobian of the tool tip in the base axes (3, 6).
+        retraction_force_n: Force the tool applies to the tissue (3,), base axes [N].
+        stiffness_n_per_m: Current tissue stiffness estimate along the force direction [N/m].
+        dt: Control period [s].
+    """
+
+    q: np.ndarray
+    qd: np.ndarray
+    tool_position_m: np.ndarray
+    tool_jacobian: np.ndarray
+    retraction_force_n: np.ndarray
+    stiffness_n_per_m: float
+    dt: float
+
+
+class LimitReport(NamedTuple):
+    """How one limit affected one tick.
+
+    Attributes:
+        name: The limit's name.
+        active: A row holds with equality (within tolerance) at the filtered command.
+        intervened: The nominal command violated the limit, so the filter had to change it.
+        nominal_violation: Largest ``G dq_nominal - h`` (> 0 when the nominal was unsafe).
+        slack: Slack used by a soft limit (0 for hard limits, or when satisfied).
+    """
+
+    name: str
+    active: bool
+    intervened: bool
+    nominal_violation: float
+    slack: float = 0.0
+
+
+class Limit(abc.ABC):
+    """One safety rule of the filter.
+
+    Attributes:
+        name: Short name used in logs and reports.
+        soft: Soft limits get a slack variable with a large penalty; hard limits must hold after the solve.
+        rows: Number of inequality rows this limit always returns.
+        penalty_scale: Multiplies the filter's slack penalty for a soft limit (its priority).
+    """
+
+    name: str = "limit"
+    soft: bool = False
+    rows: int = 0
+    penalty_scale: float = 1.0
+
+    @abc.abstractmethod
+    def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``(G, h)`` with ``G`` of shape (rows, 6) and ``h`` of shape (rows,)."""
+
+    def report(
+        self, G: np.ndarray, h: np.ndarray, dq_nominal: np.ndarray, dq: np.ndarray, tolerance: float, slack: float = 0.0
+    ) -> LimitReport:
+        """Say whether this limit was active at ``dq`` and whether the nominal command violated it."""
+        finite = np.isfinite(h)
+        if not np.any(finite):
+            return LimitReport(self.name, False, False, 0.0, slack)
+        violation = float(np.max(G[finite] @ dq_nominal - h[finite]))
+        margin = float(np.max(G[finite] @ dq - h[finite]))
+        return LimitReport(self.name, margin >= -tolerance, violation > tolerance, max(violation, 0.0), slack)
