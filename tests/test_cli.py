@@ -53,7 +53,7 @@ def test_unbuilt_subcommand_says_so_and_fails(command: list[str]) -> None:
 
 def test_kinematics_demo_agrees_three_ways() -> None:
     """The demo prints the tool-tip table and the three kinematics agree."""
-    result = _cli("demo", "--arm", "si")
+    result = _cli("demo", "--kinematics", "--arm", "si")
     assert result.returncode == 0, result.stderr
     assert "psm_si_420006" in result.stdout
     assert "largest disagreement" in result.stdout

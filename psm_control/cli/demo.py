@@ -1,8 +1,15 @@
-"""``tissue-retract demo``: the PSM's kinematics at named configurations, cross-checked three ways.
+"""``tissue-retract demo``: scripted-expert episodes in the retraction simulation, and the kinematics check.
 
-For each configuration it prints the tool-tip position about the RCM from the Pinocchio model, and the
-largest disagreement with an independent closed-form DH product and with PyBullet's link poses of
-the same URDF: numbers a user can check against the dVRK's own ``local/measured_cp``.
+With no arguments it runs one episode of Task III (multi-site retraction) with the scripted expert and
+prints a summary. ``--out demos.npz`` writes the successful episodes as demonstrations, ``--video
+out.gif`` records the first episode from the endoscope camera. ``--kinematics`` instead prints the
+tool-tip position about the RCM at named configurations from the Pinocchio model, with the largest
+disagreement with a closed-form DH product and with PyBullet's link poses of the same URDF.
+
+Demonstration file (``numpy.savez_compressed``), E successful episodes of T steps:
+``observation`` (E, T+1, 18), ``achieved_goal`` / ``desired_goal`` (E, T+1, G), ``action`` (E, T, 5),
+``reward`` (E, T), ``seed`` (E,), and ``metadata``: a JSON string with the task, Gymnasium id, seeds,
+each episode's randomization values, the package version and this layout.
 """
 
 from __future__ import annotations
@@ -20,11 +27,18 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     """Register the subcommand."""
     parser = subparsers.add_parser(
         "demo",
-        help="show the PSM's forward kinematics, cross-checked against DH and PyBullet",
+        help="run scripted-expert episodes (record demos, video); --kinematics: the FK cross-check",
         description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--kinematics", action="store_true", help="print the kinematics cross-check instead")
     parser.add_argument("--arm", choices=ARMS, default="classic", help="PSM generation (default: classic)")
     parser.add_argument("--tool", choices=TOOLS, default=None, help="instrument (default: the arm's LND)")
+    parser.add_argument("--task", default="multisite", help="lift, target, multisite, expose (default: multisite)")
+    parser.add_argument("--episodes", type=int, default=1, help="episodes to run (default: 1)")
+    parser.add_argument("--seed", type=int, default=0, help="first episode seed (default: 0)")
+    parser.add_argument("--out", metavar="FILE", default=None, help="write successful episodes as .npz demos")
+    parser.add_argument("--video", metavar="FILE", default=None, help="record the first episode (.gif or .mp4)")
     parser.set_defaults(func=run)
 
 
@@ -40,6 +54,15 @@ def _named_configurations(insertion: float) -> dict[str, np.ndarray]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run expert episodes, or print the kinematics table with ``--kinematics``."""
+    if args.kinematics:
+        return run_kinematics(args)
+    from psm_control.cli._demos import run_episodes
+
+    return run_episodes(args)
+
+
+def run_kinematics(args: argparse.Namespace) -> int:
     """Print the kinematics table."""
     import pybullet as p
     from rich.console import Console

@@ -57,7 +57,7 @@ def gym_id(task: str) -> str:
     raise UnknownVariantError("task", task, [*TASKS, *(env_id for env_id, _ in TASKS.values())])
 
 
-def make(task: str, **kwargs: Any) -> gym.Env[Any, Any]:
+def make(task: str, **kwargs: Any) -> Any:
     """``gym.make`` for a task given by any of its names."""
     register()
     return gym.make(gym_id(task), **kwargs)

@@ -1,0 +1,110 @@
+"""Scripted-expert episodes for ``tissue-retract demo``: summary, demonstration file and video."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import warnings
+from typing import Any
+
+import numpy as np
+
+__all__ = ["run_episodes"]
+
+
+def run_episodes(args: argparse.Namespace) -> int:
+    """Run the expert, print one line per episode, and write demos and a video if asked."""
+    from psm_control import __version__
+    from psm_control.errors import ConfigurationError
+    from sim.envs import gym_id, make
+    from sim.expert import ScriptedExpert
+
+    if args.episodes < 1:
+        raise ConfigurationError("--episodes", args.episodes, "a positive number of episodes")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        env = make(args.task)
+    expert = ScriptedExpert(env)
+    kept: list[dict[str, Any]] = []
+    frames: list[np.ndarray] = []
+    successes = 0
+    try:
+        for index in range(args.episodes):
+            seed = args.seed + index
+            episode = _episode(env, expert, seed, frames if args.video and index == 0 else None)
+            successes += int(episode["success"])
+            print(
+                f"episode {index} seed {seed}: site {episode['site']}, "
+                f"{'success' if episode['success'] else 'failure'} in {len(episode['action'])} steps, "
+                f"peak force {episode['peak_force_n']:.3f} N, max strain {episode['max_strain']:.2f}, "
+                f"final exposure {episode['exposure']:.2f}, controller: {env.unwrapped.controller_name}"
+            )
+            if episode["success"]:
+                kept.append(episode)
+    finally:
+        env.close()
+    print(f"{gym_id(args.task)}: scripted expert succeeded in {successes}/{args.episodes} episodes")
+    if args.out:
+        _save(args.out, kept, gym_id(args.task), args.task, __version__)
+        print(f"wrote {len(kept)} demonstrations to {args.out}")
+    if args.video:
+        import imageio.v2 as imageio
+
+        timing: dict[str, Any] = {"duration": 50} if args.video.endswith(".gif") else {"fps": 20}
+        imageio.mimsave(args.video, frames, **timing)
+        print(f"wrote {len(frames)} frames to {args.video}")
+    return 0
+
+
+def _episode(env: Any, expert: Any, seed: int, frames: list[np.ndarray] | None) -> dict[str, Any]:
+    observation, info = env.reset(seed=seed)
+    expert.reset()
+    observations, actions, rewards = [observation], [], []
+    peak, strain = 0.0, 0.0
+    if frames is not None:
+        frames.append(env.unwrapped.render_frame().rgb)
+    while True:
+        action = expert(observation)
+        observation, reward, terminated, truncated, info = env.step(action)
+        observations.append(observation)
+        actions.append(action)
+        rewards.append(reward)
+        peak, strain = max(peak, info["force_norm_n"]), max(strain, info["max_strain"])
+        if frames is not None:
+            frames.append(env.unwrapped.render_frame().rgb)
+        if terminated or truncated:
+            break
+    return {
+        "seed": seed,
+        "site": info["site"],
+        "success": bool(info["is_success"]) and not info["sim_unstable"],
+        "observation": np.stack([o["observation"] for o in observations]),
+        "achieved_goal": np.stack([o["achieved_goal"] for o in observations]),
+        "desired_goal": np.stack([o["desired_goal"] for o in observations]),
+        "action": np.stack(actions).astype(np.float32),
+        "reward": np.asarray(rewards, dtype=np.float32),
+        "peak_force_n": peak,
+        "max_strain": strain,
+        "exposure": info["exposure"],
+        "randomization": info["randomization"],
+    }
+
+
+def _save(path: str, episodes: list[dict[str, Any]], env_id: str, task: str, version: str) -> None:
+    metadata = {
+        "task": task,
+        "gym_id": env_id,
+        "seeds": [e["seed"] for e in episodes],
+        "sites": [e["site"] for e in episodes],
+        "randomization": [e["randomization"] for e in episodes],
+        "package_version": version,
+        "source": "sim.expert.ScriptedExpert",
+        "layout": "observation (E,T+1,18), achieved_goal/desired_goal (E,T+1,G), action (E,T,5), reward (E,T)",
+    }
+    arrays: dict[str, Any] = {
+        key: np.stack([e[key] for e in episodes]) if episodes else np.zeros((0,))
+        for key in ("observation", "achieved_goal", "desired_goal", "action", "reward")
+    }
+    np.savez_compressed(
+        path, **arrays, seed=np.array([e["seed"] for e in episodes], dtype=np.int64), metadata=json.dumps(metadata)
+    )

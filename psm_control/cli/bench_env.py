@@ -1,0 +1,78 @@
+"""``tissue-retract bench env``: environment steps per second with random actions, single process.
+
+State-only observations with the default tissue and the controller in the loop, then the same with an
+endoscope render every step. Pin it to one core to compare with the paper's about 30 steps/s:
+``taskset -c 0 tissue-retract bench env``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the target's options."""
+    parser.add_argument("--task", default="multisite", help="task (default: multisite)")
+    parser.add_argument("--steps", type=int, default=1000, help="state-only steps (default: 1000)")
+    parser.add_argument("--render-steps", type=int, default=100, help="steps with rendering (default: 100)")
+
+
+def _rate(env: object, steps: int, render: bool) -> tuple[float, int]:
+    env.reset(seed=0)  # type: ignore[attr-defined]
+    env.action_space.seed(0)  # type: ignore[attr-defined]
+    unstable = 0
+    start = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, info = env.step(env.action_space.sample())  # type: ignore[attr-defined]
+        unstable += int(info["sim_unstable"])
+        if render:
+            env.unwrapped.render_frame()  # type: ignore[attr-defined]
+        if terminated or truncated:
+            env.reset()  # type: ignore[attr-defined]
+    return steps / (time.perf_counter() - start), unstable
+
+
+def run(args: argparse.Namespace) -> int:
+    """Measure and print."""
+    import os
+
+    from sim.envs import make
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        env = make(args.task)
+    try:
+        physics = env.unwrapped.config.physics
+        state_rate, unstable = _rate(env, args.steps, render=False)
+        render_rate, _ = _rate(env, args.render_steps, render=True)
+    finally:
+        env.close()
+    results = {
+        "env_steps_per_s": state_rate,
+        "render_env_steps_per_s": render_rate,
+        "task": args.task,
+        "steps": args.steps,
+        "sim_unstable_steps": unstable,
+        "substeps": physics.substeps,
+        "time_step_s": physics.time_step_s,
+        "solver_iterations": physics.solver_iterations,
+        "tissue_resolution": env.unwrapped.config.tissue.resolution,
+        "cpus_allowed": len(os.sched_getaffinity(0)),
+        "load_average_1min": os.getloadavg()[0],
+    }
+    print(f"state-only:      {state_rate:8.1f} env steps/s ({args.steps} steps, resets included)")
+    print(f"with rendering:  {render_rate:8.1f} env steps/s ({args.render_steps} steps)")
+    print(
+        f"settings: {physics.substeps} substeps x {physics.time_step_s:.5f} s, {physics.solver_iterations} solver "
+        f"iterations, {results['tissue_resolution']}x{results['tissue_resolution']} flap; unstable steps: {unstable}; "
+        f"cpus allowed {results['cpus_allowed']}, load {results['load_average_1min']:.2f}"
+    )
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(results, f, indent=2)
+    return 0

@@ -1,0 +1,162 @@
+"""Running episodes of a policy and summarising them: success, forces, events, failure classes.
+
+The failure classes replace the paper's by-hand classification: an unsuccessful episode is labelled by
+the most serious event it saw (``sim_unstable`` > ``safety_stop`` > ``tissue_damage`` > ``grip_loss``
+> ``improper_grasp``), and ``timeout`` when none occurred. Success is scored at the final step, as in
+the paper's evaluation.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from psm_control.errors import ConfigurationError
+
+__all__ = ["FAILURE_CLASSES", "EpisodeResult", "Policy", "resolve_policy", "run_episode", "summarize"]
+
+FAILURE_CLASSES = ("none", "improper_grasp", "grip_loss", "tissue_damage", "safety_stop", "timeout", "sim_unstable")
+_SEVERITY = ("sim_unstable", "safety_stop", "tissue_damage", "grip_loss", "improper_grasp")
+
+Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
+
+
+@dataclass
+class EpisodeResult:
+    """One evaluated episode (the JSON ``episodes`` entries)."""
+
+    seed: int
+    success: bool
+    steps: int
+    peak_force_n: float
+    failure_class: str
+    grip_losses: int
+    tissue_damage: bool
+    improper_grasps: int
+    sim_unstable: bool
+    final_exposure: float
+    joint_limit_violations: int
+    workspace_violation_mm: float | None
+    min_insertion_margin_m: float
+    safety_stops: int
+    interventions: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary."""
+        return asdict(self)
+
+
+def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
+    """A policy and its per-episode reset from ``scripted``, ``random``, ``module:callable`` or a checkpoint.
+
+    Raises:
+        ConfigurationError: The policy cannot be found or checkpoints are not supported yet.
+    """
+    if spec == "scripted":
+        from sim.expert import ScriptedExpert
+
+        expert = ScriptedExpert(env)
+        return expert, expert.reset
+    if spec == "random":
+        return (lambda _obs: env.action_space.sample()), (lambda: None)
+    if ":" in spec and not spec.endswith((".pt", ".safetensors", ".zip")):
+        module_name, _, attribute = spec.partition(":")
+        try:
+            target = getattr(importlib.import_module(module_name), attribute)
+        except (ImportError, AttributeError) as e:
+            raise ConfigurationError("policy", spec, "an importable module:callable") from e
+        reset = getattr(target, "reset", None)
+        return target, (reset if callable(reset) else (lambda: None))
+    try:
+        checkpoint = importlib.import_module("policies.checkpoint")
+    except ImportError:
+        checkpoint = None
+    loader = getattr(checkpoint, "load_policy", None)
+    if loader is None:
+        raise ConfigurationError(
+            "policy", spec, "'scripted', 'random' or 'module:callable' (checkpoints are not supported yet)"
+        )
+    policy = loader(spec, env)
+    reset = getattr(policy, "reset", None)
+    return policy, (reset if callable(reset) else (lambda: None))
+
+
+def run_episode(env: Any, policy: Policy, reset: Callable[[], None], seed: int) -> EpisodeResult:
+    """Run one episode to its end and classify it."""
+    model = env.unwrapped.model
+    minimum_insertion = model.spec.rcm.min_insertion_m
+    observation, info = env.reset(seed=seed)
+    reset()
+    counts = dict.fromkeys(_SEVERITY, 0)
+    peak, steps, violations, stops, interventions = 0.0, 0, 0, 0, 0
+    margin = float(info["insertion_m"]) - minimum_insertion
+    while True:
+        observation, _, terminated, truncated, info = env.step(policy(observation))
+        steps += 1
+        peak = max(peak, float(info["force_norm_n"]))
+        for event in _SEVERITY:
+            counts[event] += int(bool(info[event]))
+        q = np.asarray(info["q"])
+        violations += int(np.any(q < model.lower - 1e-9) or np.any(q > model.upper + 1e-9))
+        margin = min(margin, float(info["insertion_m"]) - minimum_insertion)
+        stops += int(info["safety_stops"])
+        interventions += len(info["interventions"])
+        if terminated or truncated:
+            break
+    success = bool(info["is_success"]) and not counts["sim_unstable"]
+    failure = "none" if success else next((e for e in _SEVERITY if counts[e]), "timeout")
+    return EpisodeResult(
+        seed=seed,
+        success=success,
+        steps=steps,
+        peak_force_n=peak,
+        failure_class=failure,
+        grip_losses=counts["grip_loss"],
+        tissue_damage=counts["tissue_damage"] > 0,
+        improper_grasps=counts["improper_grasp"],
+        sim_unstable=counts["sim_unstable"] > 0,
+        final_exposure=float(info["exposure"]),
+        joint_limit_violations=violations,
+        workspace_violation_mm=None,
+        min_insertion_margin_m=margin,
+        safety_stops=stops,
+        interventions=interventions,
+    )
+
+
+def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, Any]:
+    """The JSON ``summary``: success rate with a 95 % normal-approximation half-width, forces, events."""
+    n = len(results)
+    if n == 0:
+        raise ConfigurationError("episodes", 0, "at least one episode")
+    rate = float(np.mean([r.success for r in results]))
+    steps = sum(r.steps for r in results)
+    return {
+        "success_rate": rate,
+        "ci95": float(1.96 * np.sqrt(rate * (1.0 - rate) / n)),
+        "episodes": n,
+        "peak_force_n": float(max(r.peak_force_n for r in results)),
+        "mean_peak_force_n": float(np.mean([r.peak_force_n for r in results])),
+        "grip_losses": int(sum(r.grip_losses for r in results)),
+        "tissue_damage": int(sum(r.tissue_damage for r in results)),
+        "sim_unstable": int(sum(r.sim_unstable for r in results)),
+        "env_steps_per_s": float(steps / elapsed_s) if elapsed_s > 0 else 0.0,
+        "failure_classes": {c: sum(r.failure_class == c for r in results) for c in FAILURE_CLASSES},
+        "joint_limit_violations": int(sum(r.joint_limit_violations for r in results)),
+        "workspace_violation_mm": None,
+        "min_insertion_margin_m": float(min(r.min_insertion_margin_m for r in results)),
+        "safety_stops": int(sum(r.safety_stops for r in results)),
+        "interventions": int(sum(r.interventions for r in results)),
+    }
+
+
+def timed(function: Callable[[], Any]) -> tuple[Any, float]:
+    """Call ``function`` and return its result with the wall time it took [s]."""
+    start = time.perf_counter()
+    result = function()
+    return result, time.perf_counter() - start
