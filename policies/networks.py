@@ -23,7 +23,7 @@ def mlp(in_dim: int, hidden: Sequence[int], out_dim: int) -> nn.Sequential:
     layers: list[nn.Module] = []
     last = in_dim
     for width in hidden:
-        layers += [nn.Linear(last, width), nn.ReLU()]
+        layers += [nn.Linear(last, width), nn.ReLU(inplace=True)]
         last = width
     layers.append(nn.Linear(last, out_dim))
     return nn.Sequential(*layers)

@@ -31,9 +31,9 @@ class CoL(DDPGBC):
             for i in range(n):
                 demo = data.rows(i * B, (i + 1) * B)
                 loss = (self.actor(demo.x) - demo.action).pow(2).sum(-1).mean() / self.dims.action
-                self.actor_opt.zero_grad(set_to_none=True)
+                self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                self.actor_opt.step()
+                self.optimizer.step()
                 loss_value = loss.item()
         self.actor_target.load_state_dict(self.actor.state_dict())
         return {"bc_pretrain_loss": loss_value}

@@ -3,6 +3,10 @@
 Deterministic tanh actor, one critic, Polyak-averaged targets, Gaussian exploration noise. The critic
 regresses on r + gamma Q_targ(s', pi_targ(s')) clipped to the range of returns of 0/-1 rewards,
 [-1 / (1 - gamma), 0]; the actor minimises -Q(s, pi(s)) + action_l2 * mean(pi(s)^2).
+
+Both losses are built from the networks as they are at the start of the update and minimised by one
+optimiser step (the reference code steps the critic first, then builds the actor loss on the updated
+critic; with tau = 0.005 targets the difference is one update of lag in the actor's critic).
 """
 
 from __future__ import annotations
@@ -30,8 +34,7 @@ class DDPG(Agent):
         self.critic = Critic(self.in_dim, self.dims.action, h)
         self.actor_target = copy.deepcopy(self._actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
-        self.actor_opt = adam(self._actor.parameters(), c.lr_actor)
-        self.critic_opt = adam(self.critic.parameters(), c.lr_critic)
+        self.optimizer = adam([(self._actor.parameters(), c.lr_actor), (self.critic.parameters(), c.lr_critic)])
 
     @property
     def actor(self) -> nn.Module:
@@ -46,7 +49,7 @@ class DDPG(Agent):
         }
 
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
-        return {"actor_opt": self.actor_opt, "critic_opt": self.critic_opt}
+        return {"adam": self.optimizer}
 
     @property
     def q_bounds(self) -> tuple[float, float]:
@@ -74,14 +77,16 @@ class DDPG(Agent):
         cb = self.critic_batch(batch, demo)
         target = self.critic_target_value(cb, demo)
         critic_loss = F.mse_loss(self.critic(cb.x, cb.action), target)
-        self.critic_opt.zero_grad(set_to_none=True)
-        critic_loss.backward()
-        self.critic_opt.step()
-
-        actor_loss, metrics = self.actor_loss(batch, demo)
-        self.actor_opt.zero_grad(set_to_none=True)
-        actor_loss.backward()
-        self.actor_opt.step()
+        # The actor's gradient flows through the critic's input only: with the critic's weights frozen
+        # while the actor loss is built, one backward pass gives each network the gradient of its own loss.
+        self.critic.requires_grad_(False)
+        try:
+            actor_loss, metrics = self.actor_loss(batch, demo)
+        finally:
+            self.critic.requires_grad_(True)
+        self.optimizer.zero_grad(set_to_none=True)
+        (critic_loss + actor_loss).backward()
+        self.optimizer.step()
 
         tau = self.config.tau
         polyak(self.critic_target, self.critic, tau)

@@ -35,9 +35,13 @@ class SQIL(Agent):
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
         self.log_alpha = torch.tensor([math.log(c.sac_init_temperature)], requires_grad=True)
         self.target_entropy = -float(self.dims.action)
-        self.actor_opt = adam(self._actor.parameters(), c.lr_actor)
-        self.critic_opt = adam(self.critic.parameters(), c.lr_critic)
-        self.alpha_opt = adam([self.log_alpha], c.lr_actor)
+        self.optimizer = adam(
+            [
+                (self._actor.parameters(), c.lr_actor),
+                (self.critic.parameters(), c.lr_critic),
+                ([self.log_alpha], c.lr_actor),
+            ]
+        )
 
     @property
     def actor(self) -> nn.Module:
@@ -47,7 +51,7 @@ class SQIL(Agent):
         return {"actor": self._actor, "critic": self.critic, "critic_target": self.critic_target}
 
     def optimizers(self) -> dict[str, torch.optim.Optimizer]:
-        return {"actor_opt": self.actor_opt, "critic_opt": self.critic_opt, "alpha_opt": self.alpha_opt}
+        return {"adam": self.optimizer}
 
     def extra_tensors(self) -> dict[str, torch.Tensor]:
         return {"log_alpha": self.log_alpha}
@@ -74,21 +78,17 @@ class SQIL(Agent):
             target = b.reward + self.config.gamma * (1.0 - b.done) * next_v
         q1, q2 = self.critic(b.x, b.action)
         critic_loss = F.mse_loss(q1, target) + F.mse_loss(q2, target)
-        self.critic_opt.zero_grad(set_to_none=True)
-        critic_loss.backward()
-        self.critic_opt.step()
-
-        action, logp = self._actor.sample(b.x)
-        q1_pi, q2_pi = self.critic(b.x, action)
+        self.critic.requires_grad_(False)
+        try:
+            action, logp = self._actor.sample(b.x)
+            q1_pi, q2_pi = self.critic(b.x, action)
+        finally:
+            self.critic.requires_grad_(True)
         actor_loss = (alpha * logp - torch.min(q1_pi, q2_pi)).mean()
-        self.actor_opt.zero_grad(set_to_none=True)
-        actor_loss.backward()
-        self.actor_opt.step()
-
         alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
-        self.alpha_opt.zero_grad(set_to_none=True)
-        alpha_loss.backward()
-        self.alpha_opt.step()
+        self.optimizer.zero_grad(set_to_none=True)
+        (critic_loss + actor_loss + alpha_loss).backward()
+        self.optimizer.step()
 
         polyak(self.critic_target, self.critic, self.config.tau)
         return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(), "alpha": float(alpha)}
