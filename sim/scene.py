@@ -27,7 +27,10 @@ __all__ = ["HIDDEN_HALF_EXTENTS_M", "PhysicsParams", "Scene"]
 #: Half extents of the hidden tissue box (x, y, z) [m].
 HIDDEN_HALF_EXTENTS_M = np.array([0.022, 0.015, 0.004])
 _HIDDEN_CENTRE_Y_M = 0.018  # under the free-edge half of the flap
-_FLAP_HEIGHT_M = 2 * HIDDEN_HALF_EXTENTS_M[2] + 0.004
+# The pinned edges sit this far above the hidden tissue so that the flap, sagging under gravity (up to
+# about 15 mm over the randomization ranges), does not rest on it: resting deformable-rigid contact
+# costs about three times the rest of a substep (measured), while the retraction lifts the flap anyway.
+_FLAP_HEIGHT_M = 2 * HIDDEN_HALF_EXTENTS_M[2] + 0.018
 _RCM_ABOVE_FLAP_M = 0.135
 
 
@@ -41,12 +44,15 @@ class PhysicsParams:
         substeps: Substeps per environment step (12 x 1/240 s = 0.05 s per step).
         solver_iterations: Constraint solver iterations (the paper's code used 50).
         settle_s: Time the flap settles under gravity before an episode starts [s].
+        control_period_s: Period of the controller's ticks [s]; a joint set-point is held for the
+            substeps in between, as the dVRK's servo loop holds its last ``servo_jp``.
     """
 
     time_step_s: float = 1.0 / 240.0
     substeps: int = 12
     solver_iterations: int = 10
     settle_s: float = 0.25
+    control_period_s: float = 1.0 / 60.0
 
     def __post_init__(self) -> None:
         if not 0 < self.time_step_s <= 0.01:
@@ -135,11 +141,12 @@ class Scene:
         """World position of the point midway along the jaws [m], from the arm's measured joints."""
         return self.body.link_pose(GRASP_FRAME)[:3, 3]
 
-    def step_physics(self) -> None:
-        """One physics substep with the jaw proxy on the grasp point."""
+    def step_physics(self, substeps: int = 1) -> None:
+        """Physics substeps with the jaw proxy on the grasp point (the arm holds still meanwhile)."""
         if self.grasp.holding:
             self.grasp.follow(self.grasp_position())
-        p.stepSimulation(physicsClientId=self.client)
+        for _ in range(substeps):
+            p.stepSimulation(physicsClientId=self.client)
 
     def settle(self) -> None:
         """Let the flap come to rest under gravity."""

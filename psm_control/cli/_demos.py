@@ -26,7 +26,7 @@ def run_episodes(args: argparse.Namespace) -> int:
         env = make(args.task)
     expert = ScriptedExpert(env)
     kept: list[dict[str, Any]] = []
-    frames: list[np.ndarray] = []
+    frames: list[Any] = []
     successes = 0
     try:
         for index in range(args.episodes):

@@ -139,7 +139,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.scene.settle()
         self.backend = SimBackend(self.scene.body, self.scene.configuration.q, cfg.jaw_open_rad)
         self.controller, self.controller_name = make_controller(
-            self.scene.configuration, safety=cfg.safety, control_period_s=cfg.physics.time_step_s
+            self.scene.configuration, safety=cfg.safety, control_period_s=cfg.physics.control_period_s
         )
         self.controller.reset(self.backend.measure())
         self._nodes = self.scene.tissue.positions()
@@ -173,14 +173,18 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.controller.set_target(delta, measured)
         stops, reasons = 0, []
         interventions: set[str] = set()
-        for _ in range(cfg.physics.substeps):
+        per_tick = max(1, round(self.controller.control_period_s / cfg.physics.time_step_s))
+        done = 0
+        while done < cfg.physics.substeps:
             output = self.controller.tick(measured)
             if output.safety_stop:
                 stops += 1
                 reasons.append(output.reason)
             interventions.update(output.interventions)
             self.backend.servo_jp(output.command)
-            self.scene.step_physics()
+            count = min(per_tick, cfg.physics.substeps - done)
+            self.scene.step_physics(count)
+            done += count
             measured = self._measured()
         previous = self._nodes
         self._nodes = self.scene.tissue.positions()
