@@ -50,11 +50,15 @@ _TRACKING_TOLERANCE = 1e-6
 def default_limits(config: SafetyConfig) -> list[Limit]:
     """The filter's limits for a configuration, hard ones first."""
     step = config.velocity * config.horizon_s
+    margin = np.asarray(config.position_margin)
+    lower = config.spec.lower + margin
+    lower[2] = max(lower[2], config.min_insertion_m)
+    upper = config.spec.upper - margin
     return [
         JointPositionLimit(config.spec.lower, config.spec.upper, np.asarray(config.position_margin)),
         JointVelocityLimit(config.velocity, config.horizon_s),
         RcmInsertionLimit(config.min_insertion_m, config.spec.dof),
-        JointAccelerationLimit(config.acceleration, step),
+        JointAccelerationLimit(config.acceleration, step, lower, upper),
         WorkspaceBoxLimit(np.asarray(config.workspace_min_m), np.asarray(config.workspace_max_m), config.cbf_gamma),
         RetractionForceLimit(config.effective_force_limit_n, dof=step.size),
     ]
@@ -138,6 +142,7 @@ class ControlChain:
         """Set the pose of the RCM in the base frame (as the dVRK's ``set_base_frame``)."""
         for state in (self._command_state, self._measured_state, self._verifier_state):
             state.set_base_frame(transform_rcm_to_base)
+        self.verifier.set_base_frame(self._command_state.base_frame)
 
     # -- Controller protocol -------------------------------------------------------------------------
 

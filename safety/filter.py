@@ -91,6 +91,8 @@ class SafetyFilter:
         for limit in self.limits:
             self._slices.append(slice(start, start + limit.rows))
             start += limit.rows
+        self._starts = np.array([sl.start for sl in self._slices])
+        self._soft_index = np.array([i for i, limit in enumerate(self.limits) if limit.soft], dtype=int)
         self._hard_rows = np.concatenate(
             [np.arange(s.start, s.stop) for s, limit in zip(self._slices, self.limits, strict=True) if not limit.soft]
             or [np.zeros(0, dtype=int)]
@@ -112,6 +114,7 @@ class SafetyFilter:
         self._pattern = self._A != 0.0
         self._pattern[: self.m_limits, : self.dof] = True
         self._pattern[self.m_limits :, self.dof :] = np.eye(self.n_slack, dtype=bool)
+        self._box_only = True  # refined on the first tick, once the limits have returned their rows
         self._settings: dict[str, Any] = {
             "eps_abs": eps,
             "eps_rel": eps,
@@ -129,6 +132,8 @@ class SafetyFilter:
             G, h = limit.compute_qp_inequalities(state)
             self._A[rows, : self.dof] = G * self._scale
             self._h[rows] = h
+        hard = self._A[self._hard_rows, : self.dof]
+        self._box_only = bool(np.all(np.count_nonzero(hard, axis=1) <= 1))
 
     def problem(self, state: FilterState, dq_nominal: np.ndarray) -> qpsolvers.Problem:
         """The filter's QP for this tick as an inspectable ``qpsolvers.Problem`` (slack as lower bounds)."""
@@ -156,9 +161,11 @@ class SafetyFilter:
         G = self._A[: self.m_limits, : self.dof]
         z_nominal = dq_nominal / self._scale
         slack = np.zeros(self.n_slack)
-        nominal_ok = bool(np.all(G @ z_nominal <= self._h))
-        if nominal_ok and not self.naive:
-            z = z_nominal
+        # With only single-joint hard rows the hard set is a box and the cost separable, so the clipped
+        # nominal is optimal whenever it also meets the soft rows: no solve needed.
+        z_clipped = self._clip_hard(z_nominal.copy())
+        if not self.naive and self._box_only and bool(np.all(G @ z_clipped <= self._h)):
+            z = z_clipped
             solved = False
         else:
             x, status = self._solve_naive(dq_nominal) if self.naive else self._solve_kept(dq_nominal)
@@ -175,16 +182,26 @@ class SafetyFilter:
                     f"hard limit violated by {violation:.3g} after the solve",
                     self._problem(dq_nominal),
                 )
-        reports = []
-        k = 0
-        for limit, rows in zip(self.limits, self._slices, strict=True):
-            s = 0.0
-            if limit.soft:
-                s = float(slack[k])
-                k += 1
-            reports.append(limit.report(G[rows], self._h[rows], z_nominal, z, 1e3 * self.hard_tolerance, s))
+        tolerance = 1e3 * self.hard_tolerance
+        with np.errstate(invalid="ignore"):
+            nominal_excess = np.nan_to_num(G @ z_nominal - self._h, nan=-np.inf, neginf=-np.inf)
+            excess = np.nan_to_num(G @ z - self._h, nan=-np.inf, neginf=-np.inf)
+        nominal_worst = np.maximum.reduceat(nominal_excess, self._starts)
+        worst = np.maximum.reduceat(excess, self._starts)
+        slack_of = np.zeros(len(self.limits))
+        slack_of[self._soft_index] = slack
+        reports = tuple(
+            LimitReport(
+                limit.name,
+                bool(worst[i] >= -tolerance),
+                bool(nominal_worst[i] > tolerance),
+                float(max(nominal_worst[i], 0.0)),
+                float(slack_of[i]),
+            )
+            for i, limit in enumerate(self.limits)
+        )
         change = float(np.linalg.norm(z - z_nominal))
-        return FilterResult(dq, tuple(reports), solved, change)
+        return FilterResult(dq, reports, solved, change)
 
     def _clip_hard(self, z: np.ndarray) -> np.ndarray:
         """Project onto the hard rows that bound one joint each (the solver meets them only to tolerance)."""

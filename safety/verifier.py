@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+import pinocchio as pin
 
 from psm_control.commands import JointCommand
 from psm_control.robot import PsmConfiguration
@@ -40,7 +41,7 @@ class CommandVerifier:
 
     Args:
         config: The safety configuration (limits, workspace box and tolerance).
-        configuration: A state object used only for the verifier's own forward kinematics.
+        configuration: The robot state whose model (and base frame) the verifier's own kinematics use.
         tolerance: Numerical slack on joint, velocity and acceleration checks.
     """
 
@@ -53,7 +54,15 @@ class CommandVerifier:
         self.box_lower = np.asarray(config.workspace_min_m) - config.workspace_tolerance_m
         self.box_upper = np.asarray(config.workspace_max_m) + config.workspace_tolerance_m
         self.tolerance = tolerance
-        self._configuration = configuration
+        self._model = configuration.model.model
+        self._data = self._model.createData()
+        self._q_full = np.zeros(self._model.nq)
+        self._tip = configuration.model.frame_ids.tool_tip
+        self._base = configuration.base_frame
+
+    def set_base_frame(self, transform_rcm_to_base: np.ndarray) -> None:
+        """Use a new base frame (4x4 pose of the RCM) for the workspace check."""
+        self._base = np.array(transform_rcm_to_base, dtype=float)
         self.last_safe: JointCommand | None = None
         self.stops = 0
 
@@ -92,8 +101,9 @@ class CommandVerifier:
         if np.any(hard):
             i = int(np.argmax(hard))
             return f"joint {_NAMES[i]} acceleration {qdd[i]:.6g} beyond limit {self.acceleration[i]:.6g}"
-        self._configuration.update(q)
-        tip = self._configuration.measured_pose()[:3, 3]
+        self._q_full[: q.size] = q
+        pin.framesForwardKinematics(self._model, self._data, self._q_full)
+        tip = self._base[:3, :3] @ self._data.oMf[self._tip].translation + self._base[:3, 3]
         outside = (tip < self.box_lower) | (tip > self.box_upper)
         if np.any(outside):
             i = int(np.argmax(outside))

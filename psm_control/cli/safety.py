@@ -1,0 +1,70 @@
+"""``tissue-retract safety show [--config FILE]``: print the effective safety limits."""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the subcommand."""
+    parser = subparsers.add_parser("safety", help="show the effective safety limits", description=__doc__)
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    show = actions.add_parser("show", help="print the effective limits as a table")
+    show.add_argument("--config", metavar="FILE", default=None, help="a TOML or YAML safety configuration")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the limits of the default or given configuration."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from safety.config import FORCE_PRESETS, SafetyConfig, load_safety_config
+
+    config = load_safety_config(args.config) if args.config else SafetyConfig()
+    spec = config.spec
+    joints = Table(title=f"{spec.name}: joint limits at {config.control_rate_hz:g} Hz")
+    for column in ("joint", "lower", "upper", "margin", "velocity", "acceleration", "jerk"):
+        joints.add_column(column, justify="left" if column == "joint" else "right")
+    lower, upper = config.lower, config.upper
+    for i, joint in enumerate(spec.joints):
+        joints.add_row(
+            joint.dvrk_name,
+            f"{lower[i]:.4g}",
+            f"{upper[i]:.4g}",
+            f"{config.position_margin[i]:.4g}",
+            f"{config.velocity[i]:.4g}",
+            f"{config.acceleration[i]:.4g}",
+            f"{config.jerk[i]:.4g}",
+        )
+    other = Table(title="other limits")
+    other.add_column("setting")
+    other.add_column("value", justify="right")
+    preset = FORCE_PRESETS[config.tissue]
+    force_source = "explicit" if config.force_limit_n is not None else f"preset {config.tissue!r}: {preset.source}"
+    for name, value in (
+        ("force_limit_n", f"{config.effective_force_limit_n:g} ({force_source})"),
+        ("min_insertion_m", f"{config.min_insertion_m:g}"),
+        ("workspace_min_m", str(config.workspace_min_m)),
+        ("workspace_max_m", str(config.workspace_max_m)),
+        ("workspace_tolerance_m", f"{config.workspace_tolerance_m:g}"),
+        ("cbf_gamma", f"{config.cbf_gamma:g}"),
+        ("horizon_s", f"{config.horizon_s:g}"),
+        ("deadman_timeout_s", f"{config.deadman_timeout_s:g}"),
+        (
+            "stiffness prior / min / max [N/m]",
+            f"{config.stiffness_prior_n_per_m:g} / {config.stiffness_min_n_per_m:g} / {config.stiffness_max_n_per_m:g}",
+        ),
+        ("max_translation_m / max_yaw_rad", f"{config.max_translation_m:g} / {config.max_yaw_rad:g}"),
+        (
+            "solver eps / max_iter / hard tol",
+            f"{config.solver_eps:g} / {config.solver_max_iter} / {config.hard_tolerance:g}",
+        ),
+    ):
+        other.add_row(name, value)
+    console = Console(width=140)
+    console.print(joints)
+    console.print(other)
+    return 0
