@@ -1,0 +1,122 @@
+"""``tissue-retract train``: train DDPG+HER, SQIL, DDPGBC, CoL or DEX on a task.
+
+Writes to ``--out``: ``policy.safetensors`` (the deterministic actor, for ``evaluate`` and ``deploy``),
+``resume.safetensors`` (everything needed to continue: running the same command again resumes from
+it), ``eval.csv`` (success rate per evaluation) and TensorBoard logs in ``tb/``. Defaults are the seed
+paper's; ``--set FIELD=VALUE`` overrides any field of :class:`policies.config.TrainConfig`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+__all__ = ["add_parser", "parse_overrides", "run"]
+
+ALGOS = ("ddpg", "sqil", "ddpgbc", "col", "dex")
+
+
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the subcommand."""
+    parser = subparsers.add_parser(
+        "train",
+        help="train a policy (DDPG+HER, SQIL, DDPGBC, CoL, DEX) on a task",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--task", required=True, help="Gymnasium id, e.g. TissueRetract-Lift-v0 or TissueRetract-ToyReach-v0"
+    )
+    parser.add_argument("--algo", choices=ALGOS, default="ddpg", help="algorithm (default: ddpg)")
+    parser.add_argument("--demos", type=int, default=100, help="demonstration episodes (default: 100; unused by ddpg)")
+    parser.add_argument("--demos-file", type=Path, default=None, help="read demonstrations from this .npz")
+    parser.add_argument("--seed", type=int, default=1, help="seed (default: 1)")
+    parser.add_argument("--episodes", type=int, default=1000, help="training episodes (default: 1000)")
+    parser.add_argument("--out", type=Path, default=None, help="output directory (default: runs/TASK/ALGO-sSEED)")
+    parser.add_argument("--eval-every", type=int, default=50, help="evaluate and checkpoint every N episodes")
+    parser.add_argument("--eval-episodes", type=int, default=50, help="episodes per evaluation (default: 50)")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE", help="override a TrainConfig field (JSON value)"
+    )
+    parser.add_argument("--fresh", action="store_true", help="ignore an existing checkpoint in --out and start over")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--no-tensorboard", action="store_true", help="no TensorBoard logs")
+    parser.set_defaults(func=run)
+
+
+def parse_overrides(items: list[str]) -> dict[str, object]:
+    """``FIELD=VALUE`` pairs as a dict; values are JSON (``64``, ``[64,64]``, ``false``) or plain strings."""
+    from psm_control.errors import ConfigurationError
+
+    out: dict[str, object] = {}
+    for item in items:
+        name, sep, raw = item.partition("=")
+        if not sep or not name:
+            raise ConfigurationError("--set", item, "FIELD=VALUE")
+        try:
+            value: object = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw
+        out[name.strip().replace("-", "_")] = tuple(value) if isinstance(value, list) else value
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    """Train, print where the policy is, its last success rate and the throughput."""
+    import dataclasses
+
+    from policies.config import TrainConfig
+    from policies.trainer import RunSpec, train
+    from psm_control.errors import ConfigurationError
+
+    overrides = parse_overrides(args.set)
+    known = {f.name for f in dataclasses.fields(TrainConfig)}
+    for name in overrides:
+        if name not in known or name == "algo":
+            raise ConfigurationError(
+                "--set", name, "a TrainConfig field other than algo: " + ", ".join(sorted(known - {"algo"}))
+            )
+    config = TrainConfig(algo=args.algo, **overrides)  # type: ignore[arg-type]
+    out = args.out if args.out is not None else Path("runs") / args.task / f"{args.algo}-s{args.seed}"
+    command = shlex.join(["tissue-retract", *sys.argv[1:]]) if sys.argv[1:2] == ["train"] else _rebuild(args)
+    spec = RunSpec(
+        task_id=args.task,
+        seed=args.seed,
+        episodes=args.episodes,
+        demos=args.demos,
+        out_dir=out,
+        eval_every=args.eval_every,
+        eval_episodes=args.eval_episodes,
+        demos_file=args.demos_file,
+        command=command,
+        resume=not args.fresh,
+        progress=not args.no_progress,
+        tensorboard=not args.no_tensorboard,
+    )
+    result = train(spec, config)
+    if result.resumed_from:
+        print(f"resumed from episode {result.resumed_from}")
+    for episode, success in result.success_rates:
+        print(f"episode {episode:6d}: success {100 * success:5.1f} %")
+    print(f"policy: {result.policy_path}")
+    print(f"resume checkpoint: {result.resume_path}")
+    if result.env_steps:
+        update_share = result.update_seconds / result.train_seconds if result.train_seconds else 0.0
+        print(
+            f"throughput: {result.steps_per_second:.1f} env steps/s including gradient updates "
+            f"({result.env_steps} steps in {result.train_seconds:.1f} s; updates {100 * update_share:.0f} % of it)"
+        )
+    return 0
+
+
+def _rebuild(args: argparse.Namespace) -> str:
+    parts = ["tissue-retract", "train", "--task", args.task, "--algo", args.algo, "--demos", str(args.demos)]
+    parts += ["--seed", str(args.seed), "--episodes", str(args.episodes)]
+    if args.out is not None:
+        parts += ["--out", str(args.out)]
+    for item in args.set:
+        parts += ["--set", item]
+    return shlex.join(parts)
