@@ -1,0 +1,398 @@
+"""A PSM client speaking the dVRK's CRTK topics: a control-chain :class:`~psm_control.commands.Backend`.
+
+:class:`PsmClient` subscribes to the arm's state and events and publishes its commands. It spins its
+own executor on a background thread, so :meth:`PsmClient.measure` and :meth:`PsmClient.servo_jp` are
+plain calls from the control loop, the same as on the simulation. A :class:`~hardware_if.deadman.Deadman`
+guards every motion command: on a stale measurement, a vanished publisher, an arm not ENABLED and homed,
+or a tracking error beyond the dVRK's tolerances, the client stops forwarding commands, holds by
+re-sending the arm's current set-point, logs the reason once, and reports it in :attr:`PsmClient.status`.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+from crtk_msgs.msg import OperatingState, StringStamped  # type: ignore[import-untyped]
+from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
+from std_msgs.msg import String  # type: ignore[import-untyped]
+
+from hardware_if import convert
+from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
+from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
+from hardware_if.errors import DvrkTimeoutError
+from psm_control.commands import JointCommand, MeasuredState
+
+__all__ = ["PsmClient"]
+
+#: How often the watchdog looks at the arm [s] (also how often it counts publishers in the graph).
+WATCHDOG_PERIOD_S = 0.02
+#: A state command is re-sent this often while waiting, in case discovery had not matched yet [s].
+RESEND_PERIOD_S = 0.5
+#: An arm that reports homed and idle without passing through homing is taken as homed after this [s].
+HOME_GRACE_S = 1.0
+#: Allowed clock difference between this machine and the arm's when comparing stamps [s].
+CLOCK_SLACK_S = 0.05
+
+
+class PsmClient(Node):
+    """Client of one dVRK arm over ROS 2.
+
+    Args:
+        arm: Arm name / namespace (``PSM1``, ``PSM2``, ...).
+        deadman_timeout_s: Largest age of ``measured_js`` before holding [s].
+        on_fault: Called (from the ROS thread) with the status when a hold starts.
+        node_name: ROS node name; default ``<arm>_client``.
+
+    Use as a context manager (or call :meth:`start` and :meth:`close`).
+    """
+
+    def __init__(
+        self,
+        arm: str = DEFAULT_ARM,
+        *,
+        deadman_timeout_s: float = 0.1,
+        on_fault: Callable[[DeadmanStatus], None] | None = None,
+        node_name: str | None = None,
+    ) -> None:
+        self.topics = ArmTopics(arm)
+        super().__init__(node_name or f"{arm.lower()}_client")
+        self._lock = threading.Condition()
+        self._deadman = Deadman(timeout_s=deadman_timeout_s)
+        self._on_fault = on_fault
+        self._measured: JointState | None = None
+        self._measured_rx_s: float | None = None
+        self._setpoint_q: np.ndarray | None = None
+        self._jaw = 0.0
+        self._force_body_n = np.zeros(3)
+        self._poses: dict[str, np.ndarray] = {}
+        self._frame_ids: dict[str, str] = {}
+        self._state = OperatingState()
+        self._state_received = False
+        self._state_count = 0
+        self._unsettled_stamp_s = float("-inf")
+        self._graph_publishers = -1
+        self._commanding = False
+        self._hold_q: np.ndarray | None = None
+        self._errors: list[str] = []
+        self._executor: SingleThreadedExecutor | None = None
+        self._thread: threading.Thread | None = None
+        self._running = False
+
+        state, event = periodic_qos(), event_qos()
+        t = self.topics.topic
+        self.create_subscription(JointState, t("measured_js"), self._on_measured_js, state)
+        self.create_subscription(JointState, t("setpoint_js"), self._on_setpoint_js, state)
+        self.create_subscription(JointState, t("jaw/measured_js"), self._on_jaw, state)
+        self.create_subscription(WrenchStamped, t("body/measured_cf"), self._on_wrench, state)
+        for name in ("measured_cp", "local/measured_cp", "setpoint_cp"):
+            self.create_subscription(PoseStamped, t(name), self._pose_callback(name), state)
+        self.create_subscription(OperatingState, t("operating_state"), self._on_operating_state, event)
+        self.create_subscription(String, t("error"), self._on_error, event)
+        self._servo_jp = self.create_publisher(JointState, t("servo_jp"), state)
+        self._servo_cp = self.create_publisher(PoseStamped, t("servo_cp"), state)
+        self._move_jp = self.create_publisher(JointState, t("move_jp"), state)
+        self._move_cp = self.create_publisher(PoseStamped, t("move_cp"), state)
+        self._jaw_servo_jp = self.create_publisher(JointState, t("jaw/servo_jp"), state)
+        self._state_command = self.create_publisher(StringStamped, t("state_command"), event)
+        self.create_timer(WATCHDOG_PERIOD_S, self._watch)
+
+    # -- lifetime ---------------------------------------------------------------------------------
+    def start(self) -> PsmClient:
+        """Spin the node on a background thread."""
+        if self._thread is None:
+            self._executor = SingleThreadedExecutor(context=self.context)
+            self._executor.add_node(self)
+            self._running = True
+            self._thread = threading.Thread(target=self._spin, name=f"{self.topics.arm}-client", daemon=True)
+            self._thread.start()
+        return self
+
+    def _spin(self) -> None:
+        executor = self._executor
+        while self._running and executor is not None and self.context.ok():
+            try:
+                executor.spin_once(timeout_sec=0.05)
+            except Exception as e:  # a shut-down context ends the loop; anything else is logged, not fatal
+                if not self.context.ok():
+                    break
+                self.get_logger().error(f"callback failed: {e!r}")
+
+    def close(self) -> None:
+        """Stop spinning and destroy the node (safe to call twice)."""
+        self._running = False
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._executor is not None:
+            self._executor.shutdown(timeout_sec=1.0)
+            self._executor = None
+        self.destroy_node()
+
+    def __enter__(self) -> PsmClient:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- callbacks (ROS thread) -------------------------------------------------------------------
+    def _on_measured_js(self, message: JointState) -> None:
+        with self._lock:
+            self._measured = message
+            self._measured_rx_s = time.monotonic()
+            self._lock.notify_all()
+
+    def _on_setpoint_js(self, message: JointState) -> None:
+        try:
+            q = convert.joint_state_positions(message)
+        except ValueError as e:
+            self.get_logger().warning(f"ignoring setpoint_js: {e}")
+            return
+        with self._lock:
+            self._setpoint_q = q
+
+    def _on_jaw(self, message: JointState) -> None:
+        if len(message.position) == 1:
+            with self._lock:
+                self._jaw = float(message.position[0])
+
+    def _on_wrench(self, message: WrenchStamped) -> None:
+        with self._lock:
+            self._force_body_n = convert.wrench_force(message)
+
+    def _pose_callback(self, name: str) -> Callable[[PoseStamped], None]:
+        def callback(message: PoseStamped) -> None:
+            try:
+                pose = convert.pose_matrix(message)
+            except ValueError:
+                return
+            with self._lock:
+                self._poses[name] = pose
+                self._frame_ids[name] = message.header.frame_id
+
+        return callback
+
+    def _on_operating_state(self, message: OperatingState) -> None:
+        with self._lock:
+            self._state = message
+            self._state_received = True
+            self._state_count += 1
+            if message.is_busy or not message.is_homed:
+                self._unsettled_stamp_s = max(self._unsettled_stamp_s, convert.time_to_seconds(message.header.stamp))
+            self._lock.notify_all()
+
+    def _on_error(self, message: String) -> None:
+        with self._lock:
+            self._errors.append(message.data)
+        self.get_logger().warning(f"{self.topics.arm} error: {message.data}")
+
+    def _watch(self) -> None:
+        try:
+            publishers = self.count_publishers(self.topics.topic("measured_js"))
+        except Exception:  # the graph is unavailable while shutting down
+            return
+        with self._lock:
+            self._graph_publishers = publishers
+            if self._commanding:
+                self._apply_deadman()
+
+    # -- deadman ----------------------------------------------------------------------------------
+    def _facts(self) -> ArmFacts:
+        measured_q = None
+        if self._measured is not None:
+            try:
+                measured_q = convert.joint_state_positions(self._measured)
+            except ValueError:
+                measured_q = None
+        return ArmFacts(
+            now_s=time.monotonic(),
+            measured_rx_s=self._measured_rx_s,
+            publishers=self._graph_publishers,
+            state=self._state.state if self._state_received else "",
+            is_homed=bool(self._state.is_homed),
+            measured_q=measured_q,
+            setpoint_q=self._setpoint_q,
+        )
+
+    def _apply_deadman(self) -> DeadmanStatus:
+        """Update the deadman (lock held); on a new fault, log it, latch the hold set-point, send it."""
+        was_holding = self._deadman.status.holding
+        status = self._deadman.update(self._facts())
+        if status.holding and not was_holding:
+            facts = self._facts()
+            self._hold_q = next(
+                (q.copy() for q in (self._setpoint_q, facts.measured_q) if q is not None),
+                None,
+            )
+            self.get_logger().error(f"{self.topics.arm}: holding, {status.reason}")
+            self._send_hold()
+            if self._on_fault is not None:
+                self._on_fault(status)
+        return status
+
+    def _send_hold(self) -> None:
+        if self._hold_q is not None:
+            self._servo_jp.publish(convert.joint_state(JOINT_NAMES, self._hold_q, stamp_s=self._now_s()))
+
+    @property
+    def status(self) -> DeadmanStatus:
+        """The deadman's verdict: ``holding`` and ``reason`` tell why commands are not forwarded."""
+        with self._lock:
+            if self._commanding:
+                return self._deadman.status
+            reason = self._deadman.check(self._facts())
+            return DeadmanStatus(not reason, False, reason)
+
+    def resume(self) -> DeadmanStatus:
+        """Clear a hold if the arm is fresh, present, ENABLED, homed and tracking; return the status."""
+        with self._lock:
+            status = self._deadman.release(self._facts())
+            if not status.holding:
+                self._hold_q = None
+            return status
+
+    @property
+    def errors(self) -> list[str]:
+        """Messages the arm published on its ``error`` topic, oldest first."""
+        with self._lock:
+            return list(self._errors)
+
+    # -- Backend ----------------------------------------------------------------------------------
+    def measure(self) -> MeasuredState:
+        """The latest measurement; its ``stamp_s`` is the arm's. Never blocks, even if the arm is gone.
+
+        Raises:
+            DvrkTimeoutError: No ``measured_js`` has ever arrived (see :meth:`wait_for_measurement`).
+        """
+        with self._lock:
+            message = self._measured
+            if message is None:
+                raise DvrkTimeoutError(f"a measured_js from {self.topics.arm}", 0.0, self._state.state)
+            rotation = self._poses.get("measured_cp", np.eye(4))[:3, :3]
+            return MeasuredState(
+                q=convert.joint_state_positions(message),
+                qd=convert.joint_state_velocities(message),
+                jaw=self._jaw,
+                force_n=rotation @ self._force_body_n,
+                stamp_s=convert.time_to_seconds(message.header.stamp),
+            )
+
+    def servo_jp(self, command: JointCommand) -> None:
+        """Forward a joint set-point (and the jaw) if the deadman allows; otherwise re-send the hold."""
+        with self._lock:
+            self._commanding = True
+            status = self._apply_deadman()
+            if status.holding:
+                self._send_hold()
+                return
+            stamp = self._now_s()
+            self._servo_jp.publish(convert.joint_state(JOINT_NAMES, command.q, stamp_s=stamp))
+            self._jaw_servo_jp.publish(convert.joint_state((JAW_JOINT_NAME,), [command.jaw], stamp_s=stamp))
+
+    # -- other CRTK commands ----------------------------------------------------------------------
+    def servo_cp(self, pose_base: np.ndarray) -> bool:
+        """Send a tool pose goal (4x4, base frame); False (and nothing sent) when the deadman holds."""
+        return self._send_pose(self._servo_cp, pose_base)
+
+    def move_cp(self, pose_base: np.ndarray) -> bool:
+        """Send a tool pose goal reached by the arm's own trajectory; False when the deadman holds."""
+        return self._send_pose(self._move_cp, pose_base)
+
+    def _send_pose(self, publisher: Publisher, pose_base: np.ndarray) -> bool:
+        with self._lock:
+            if self._commanding and self._apply_deadman().holding:
+                return False
+            message = convert.pose_stamped(pose_base, self.topics.base_frame_id, self._now_s())
+            publisher.publish(message)
+            return True
+
+    def move_jp(self, q: np.ndarray) -> None:
+        """Send a joint goal the arm reaches with its own trajectory (not guarded: the arm plans it)."""
+        self._move_jp.publish(convert.joint_state(JOINT_NAMES, q, stamp_s=self._now_s()))
+
+    def jaw_servo_jp(self, jaw: float) -> None:
+        """Send a jaw angle set-point [rad]."""
+        self._jaw_servo_jp.publish(convert.joint_state((JAW_JOINT_NAME,), [jaw], stamp_s=self._now_s()))
+
+    def pose(self, name: str = "measured_cp") -> tuple[np.ndarray, str]:
+        """The latest 4x4 pose and frame_id on ``measured_cp``, ``local/measured_cp`` or ``setpoint_cp``.
+
+        Raises:
+            DvrkTimeoutError: That pose has never been received.
+        """
+        with self._lock:
+            if name not in self._poses:
+                raise DvrkTimeoutError(f"a {name} from {self.topics.arm}", 0.0, self._state.state)
+            return self._poses[name].copy(), self._frame_ids[name]
+
+    # -- blocking helpers -------------------------------------------------------------------------
+    def operating_state(self) -> tuple[str, bool, bool]:
+        """The latest (state, is_homed, is_busy); state is "" before any was received."""
+        with self._lock:
+            s = self._state
+            return (s.state if self._state_received else "", bool(s.is_homed), bool(s.is_busy))
+
+    def wait_for_measurement(self, timeout_s: float = 5.0) -> MeasuredState:
+        """Block until a ``measured_js`` has arrived, then return it."""
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            while self._measured is None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    raise DvrkTimeoutError(f"a measured_js from {self.topics.arm}", timeout_s, self._state.state)
+                self._lock.wait(remaining)
+        return self.measure()
+
+    def enable(self, timeout_s: float = 5.0) -> None:
+        """Send ``enable`` and wait for the state ENABLED."""
+        self._request("enable", lambda s: s.state == "ENABLED", timeout_s)
+
+    def home(self, timeout_s: float = 10.0) -> None:
+        """Send ``home`` and wait until the arm is ENABLED, homed and not busy."""
+        started, sent_s = time.monotonic(), self._now_s()
+
+        def done(state: OperatingState) -> bool:
+            # Homing shows as busy or not homed first. A late subscriber also gets the states of earlier
+            # homings replayed (transient local), so only a homing stamped after the request counts; an arm
+            # that does not re-home, or whose clock is behind, is accepted after a grace period.
+            settled = state.state == "ENABLED" and state.is_homed and not state.is_busy
+            homed_since = self._unsettled_stamp_s >= sent_s - CLOCK_SLACK_S
+            return settled and (homed_since or time.monotonic() - started > HOME_GRACE_S)
+
+        self._request("home", done, timeout_s)
+
+    def disable(self, timeout_s: float = 5.0) -> None:
+        """Send ``disable`` and wait for the state DISABLED."""
+        self._request("disable", lambda s: s.state == "DISABLED", timeout_s)
+
+    def _request(self, command: str, done: Callable[[OperatingState], bool], timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            # Only a state published after the command counts: an arm already homed re-homes first.
+            seen = self._state_count
+            while True:
+                self._send_state_command(command)
+                resend_at = time.monotonic() + RESEND_PERIOD_S
+                while time.monotonic() < min(resend_at, deadline):
+                    if self._state_count > seen and done(self._state):
+                        self._deadman.release(self._facts())
+                        self._hold_q = None
+                        return
+                    self._lock.wait(min(resend_at, deadline) - time.monotonic())
+                if time.monotonic() >= deadline:
+                    last = self._state.state if self._state_received else ""
+                    raise DvrkTimeoutError(f"{self.topics.arm} {command}", timeout_s, last)
+
+    def _send_state_command(self, command: str) -> None:
+        message = StringStamped(string=command)
+        message.header.stamp = convert.seconds_to_time(self._now_s())
+        self._state_command.publish(message)
+
+    def _now_s(self) -> float:
+        return float(self.get_clock().now().nanoseconds) * 1e-9

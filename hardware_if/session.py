@@ -1,0 +1,39 @@
+"""A ROS 2 session for the entry points: ``with ros_session(): ...`` initialises and shuts down rclpy.
+
+``rclpy.init()`` returns a context manager from ROS 2 Kilted on; Jazzy's returns None. This wraps both
+so that every executable has the same ``with`` shape, and turns a missing ROS install into a clear error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from hardware_if.errors import RosNotAvailableError
+
+__all__ = ["require_ros", "ros_session"]
+
+
+def require_ros() -> Any:
+    """Import and return rclpy, or raise :class:`RosNotAvailableError` naming the fix."""
+    try:
+        import rclpy
+        from crtk_msgs.msg import OperatingState  # type: ignore[import-untyped]  # noqa: F401
+    except ImportError as e:
+        raise RosNotAvailableError(
+            f"ROS 2 is not available ({e}); install the ros extra and build crtk_msgs with `make install`"
+        ) from e
+    return rclpy
+
+
+@contextmanager
+def ros_session(args: list[str] | None = None) -> Iterator[None]:
+    """Initialise rclpy's default context for the block, and shut it down after (also on Ctrl-C)."""
+    rclpy = require_ros()
+    rclpy.init(args=args)
+    try:
+        yield
+    finally:
+        if rclpy.ok():
+            rclpy.shutdown()

@@ -1,0 +1,80 @@
+"""``tissue-retract sim-dvrk``: serve a simulated dVRK PSM's CRTK topics over ROS 2.
+
+Users rehearse against it exactly as against a real console: the same topic names, types, QoS and
+frames, the operating-state machine (enable, home) and the refusal of Cartesian goals below 45 mm of
+insertion. Discovery stays on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, UDPv4) on the
+domain given by ``--domain-id`` (default: ``$ROS_DOMAIN_ID``, else 0); clients must use the same domain.
+Needs the ``ros`` extra. Ctrl-C stops it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+__all__ = ["add_parser", "run"]
+
+
+def _domain_default() -> int:
+    try:
+        return int(os.environ.get("ROS_DOMAIN_ID", "0"))
+    except ValueError:
+        return 0
+
+
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the subcommand."""
+    parser = subparsers.add_parser(
+        "sim-dvrk", help="serve the dVRK's CRTK topics from the simulation", description=__doc__
+    )
+    parser.add_argument("--arm", default="PSM1", help="arm name and topic namespace (default: PSM1)")
+    parser.add_argument(
+        "--task", default=None, metavar="ID", help="serve a task's tissue scene (force on body/measured_cf)"
+    )
+    parser.add_argument("--rate", type=float, default=100.0, help="publishing rate [Hz] (default: 100, the dVRK's)")
+    parser.add_argument(
+        "--domain-id", type=int, default=_domain_default(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
+    )
+    parser.add_argument(
+        "--base-xyz",
+        type=float,
+        nargs=3,
+        default=(0.0, 0.0, 0.0),
+        metavar=("X", "Y", "Z"),
+        help="position of the RCM in <arm>_base [m], as set_base_frame would set it (default: 0 0 0)",
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the simulated console until Ctrl-C."""
+    import numpy as np
+
+    from hardware_if.network import apply_local_ros_env
+
+    # Read by rclpy and Fast DDS when they start, so set before the first import of rclpy.
+    apply_local_ros_env(args.domain_id)
+
+    from hardware_if.session import require_ros, ros_session
+
+    rclpy = require_ros()
+    from rclpy.executors import ExternalShutdownException
+
+    from hardware_if.sim_dvrk import SimulatedPsm
+    from hardware_if.sim_task import task_arm_model
+
+    arm_model = task_arm_model(args.task) if args.task is not None else None
+    base_frame = np.eye(4)
+    base_frame[:3, 3] = args.base_xyz
+    with ros_session():
+        node = SimulatedPsm(args.arm, rate_hz=args.rate, arm_model=arm_model, base_frame=base_frame)
+        node.get_logger().info(
+            f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
+        )
+        try:
+            rclpy.spin(node)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            node.destroy_node()
+    return 0
