@@ -10,16 +10,17 @@ The ``.npz`` layout read here (one array per key, N episodes of T steps):
 ``observation`` and ``action`` are accepted as aliases of ``obs`` and ``actions``. Files are read with
 ``allow_pickle=False``: no code in a file is ever run.
 
-Without a file, episodes are generated with the task's scripted expert (:func:`expert_for`): the toy
-task's is :func:`policies.toy_env.toy_expert`; the simulation's is looked up in ``sim`` by name.
+The simulation's writer (``tissue-retract demo --task ID --episodes N --out demos.npz``) produces this
+layout. Without a file, episodes are generated with the task's scripted expert (:func:`expert_for`):
+the toy task's is :func:`policies.toy_env.toy_expert`; the simulation's is ``sim.expert.ScriptedExpert``.
+Only successful expert episodes are kept (``info["is_success"]`` and not ``info["sim_unstable"]``).
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -28,13 +29,35 @@ from policies.buffers import Episode
 from policies.errors import DemonstrationError
 from policies.toy_env import TOY_TASK_ID, toy_expert
 
-__all__ = ["Expert", "collect_demos", "expert_for", "load_demos", "rollout"]
+__all__ = ["Controller", "ExpertFactory", "collect_demos", "expert_for", "load_demos", "rollout"]
 
-#: ``expert(env, obs) -> action``: a scripted controller for one task.
-Expert = Callable[[gym.Env[Any, Any], dict[str, np.ndarray]], np.ndarray]
 
-#: Names under which the simulation package may offer its scripted expert, tried in order.
-SIM_EXPERT_NAMES = ("sim.expert:expert_action", "sim.expert:scripted_action", "sim:expert_action")
+class Controller(Protocol):
+    """A scripted controller for one env: ``reset()`` at each episode start, then ``controller(obs)``."""
+
+    def reset(self) -> None: ...
+
+    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray: ...
+
+
+#: ``factory(env) -> Controller``: how a task's scripted expert is built for an env.
+ExpertFactory = Callable[[gym.Env[Any, Any]], Controller]
+
+
+class _FunctionController:
+    """A stateless ``expert(env, obs)`` function as a :class:`Controller`."""
+
+    def __init__(
+        self, env: gym.Env[Any, Any], function: Callable[[gym.Env[Any, Any], dict[str, np.ndarray]], np.ndarray]
+    ) -> None:
+        self.env = env
+        self.function = function
+
+    def reset(self) -> None:
+        """Nothing to reset."""
+
+    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        return self.function(self.env, observation)
 
 
 def rollout(
@@ -53,7 +76,7 @@ def rollout(
         a.append(action)
         term.append(bool(terminated))
         if terminated or truncated:
-            success = bool(info.get("is_success", False))
+            success = bool(info.get("is_success", False)) and not info.get("sim_unstable", False)
             break
     episode = Episode(
         np.asarray(o, np.float32), np.asarray(ag, np.float32), np.asarray(g, np.float32),
@@ -62,32 +85,28 @@ def rollout(
     return episode, success
 
 
-def expert_for(task_id: str) -> Expert:
-    """The scripted expert of a task.
+def expert_for(task_id: str) -> ExpertFactory:
+    """The scripted expert of a task, as a factory of controllers.
 
     Raises:
         DemonstrationError: No expert is known for the task.
     """
     if task_id == TOY_TASK_ID:
-        return toy_expert
-    for name in SIM_EXPERT_NAMES:
-        module_name, attribute = name.split(":")
+        return lambda env: _FunctionController(env, toy_expert)
+    if task_id.startswith("TissueRetract-"):
         try:
-            module = importlib.import_module(module_name)
-        except ImportError:
-            continue
-        expert = getattr(module, attribute, None)
-        if callable(expert):
-            return expert
+            from sim.expert import ScriptedExpert
+        except ImportError as e:
+            raise DemonstrationError(f"the simulation's scripted expert is not available: {e}") from e
+        return ScriptedExpert
     raise DemonstrationError(
-        f"no scripted expert is available for {task_id!r}: pass a demonstrations file "
-        "(tissue-retract demo --task ID --episodes N --out demos.npz, then train --demos-file demos.npz) "
-        f"or provide one of {', '.join(SIM_EXPERT_NAMES)}"
+        f"no scripted expert is known for {task_id!r}: write demonstrations to a file "
+        "(tissue-retract demo --task ID --episodes N --out demos.npz) and pass --demos-file demos.npz"
     )
 
 
 def collect_demos(
-    env: gym.Env[Any, Any], expert: Expert, count: int, seed: int, max_attempts: int | None = None
+    env: gym.Env[Any, Any], expert: ExpertFactory, count: int, seed: int, max_attempts: int | None = None
 ) -> list[Episode]:
     """``count`` successful expert episodes (failed ones are discarded), seeded from ``seed``.
 
@@ -95,11 +114,13 @@ def collect_demos(
         DemonstrationError: The expert did not succeed ``count`` times within ``max_attempts`` episodes.
     """
     attempts = max_attempts if max_attempts is not None else 3 * count + 10
+    controller = expert(env)
     episodes: list[Episode] = []
     for i in range(attempts):
         if len(episodes) == count:
             break
-        episode, success = rollout(env, lambda obs: expert(env, obs), seed=seed + i)
+        controller.reset()
+        episode, success = rollout(env, controller, seed=seed + i)
         if success:
             episodes.append(episode)
     if len(episodes) < count:
