@@ -181,5 +181,5 @@ class DifferentialIk:
             self._solver.setup(P_csc, q, self._A, lower, upper, **self._settings)
         else:
             self._solver.update(Px=Px, q=q, l=lower, u=upper)
-        result = self._solver.solve()
+        result = self._solver.solve(raise_error=False)
         return result.x, str(result.info.status)

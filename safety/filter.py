@@ -230,7 +230,7 @@ class SafetyFilter:
             self._solver.setup(P, self._q, A, self._l, self._u, **self._settings)
         else:
             self._solver.update(q=self._q, u=self._u, Ax=Ax)
-        result = self._solver.solve()
+        result = self._solver.solve(raise_error=False)
         status = str(result.info.status)
         if status not in ("solved", "solved inaccurate"):
             return None, status

@@ -47,10 +47,7 @@ def _run(naive: bool, ticks: int, seed: int) -> np.ndarray:
         elapsed[k] = time.perf_counter_ns() - start
         t += chain.control_period_s
         tip = chain._verifier_state.model.configuration(out.command.q).measured_pose()[:3, 3] if k % 50 == 0 else None
-        if tip is not None:
-            anchor_force = -stiffness * (tip - anchor)
-        else:
-            anchor_force = measured.force_n
+        anchor_force = -stiffness * (tip - anchor) if tip is not None else measured.force_n
         measured = MeasuredState(out.command.q, out.command.qd, out.command.jaw, anchor_force, t)
     return elapsed / 1000.0
 
