@@ -86,11 +86,13 @@ def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
     return policy, (reset if callable(reset) else (lambda: None))
 
 
-def run_episode(env: Any, policy: Policy, reset: Callable[[], None], seed: int) -> EpisodeResult:
-    """Run one episode to its end and classify it."""
+def run_episode(
+    env: Any, policy: Policy, reset: Callable[[], None], seed: int, options: dict[str, Any] | None = None
+) -> EpisodeResult:
+    """Run one episode to its end and classify it (``options`` go to ``env.reset``)."""
     model = env.unwrapped.model
     minimum_insertion = model.spec.rcm.min_insertion_m
-    observation, info = env.reset(seed=seed)
+    observation, info = env.reset(seed=seed, options=options)
     reset()
     counts = dict.fromkeys(_SEVERITY, 0)
     peak, steps, violations, stops, interventions = 0.0, 0, 0, 0, 0

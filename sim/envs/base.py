@@ -54,6 +54,7 @@ class EnvConfig:
         damage: Tissue damage thresholds.
         randomization: Overrides of the randomization ranges.
         camera: The endoscope camera.
+        controller: ``"interim"`` (DLS IK, no safety filter) or ``"chain"`` (the project's control chain).
     """
 
     max_step_m: float = 0.005
@@ -68,6 +69,7 @@ class EnvConfig:
     damage: DamageLimits = field(default_factory=DamageLimits)
     randomization: dict[str, tuple[float, float]] = field(default_factory=dict)
     camera: Camera = field(default_factory=Camera)
+    controller: str = "interim"
 
 
 class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -139,7 +141,10 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.scene.settle()
         self.backend = SimBackend(self.scene.body, self.scene.configuration.q, cfg.jaw_open_rad)
         self.controller, self.controller_name = make_controller(
-            self.scene.configuration, safety=cfg.safety, control_period_s=cfg.physics.control_period_s
+            self.scene.configuration,
+            safety=cfg.safety,
+            control_period_s=cfg.physics.control_period_s,
+            kind=cfg.controller,
         )
         self.controller.reset(self.backend.measure())
         self._nodes = self.scene.tissue.positions()

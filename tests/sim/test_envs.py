@@ -138,3 +138,18 @@ def test_async_vector_env_steps() -> None:
         assert reward.shape == (2,)
     finally:
         envs.close()
+
+
+def test_env_runs_through_the_control_chain() -> None:
+    """With controller='chain' the arm moves through safety.chain.ControlChain and info reports it."""
+    env = make_env("lift", controller="chain")
+    try:
+        env.reset(seed=0)
+        start = env.unwrapped.grasp_position()
+        for _ in range(3):
+            _, _, _, _, info = env.step(np.array([0.0, 0.0, -1.0, 0.0, 1.0], dtype=np.float32))
+        assert info["controller"].startswith("ControlChain")
+        assert env.unwrapped.grasp_position()[2] < start[2] - 1e-4
+        assert isinstance(info["interventions"], tuple) and isinstance(info["safety_stop"], bool)
+    finally:
+        env.close()
