@@ -22,11 +22,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--render-steps", type=int, default=100, help="steps with rendering (default: 100)")
 
 
-def _rate(env: object, steps: int, render: bool) -> tuple[float, int]:
+def _rate(env: object, steps: int, render: bool) -> tuple[float, float, int]:
     env.reset(seed=0)  # type: ignore[attr-defined]
     env.action_space.seed(0)  # type: ignore[attr-defined]
     unstable = 0
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         _, _, terminated, truncated, info = env.step(env.action_space.sample())  # type: ignore[attr-defined]
         unstable += int(info["sim_unstable"])
@@ -34,7 +34,7 @@ def _rate(env: object, steps: int, render: bool) -> tuple[float, int]:
             env.unwrapped.render_frame()  # type: ignore[attr-defined]
         if terminated or truncated:
             env.reset()  # type: ignore[attr-defined]
-    return steps / (time.perf_counter() - start), unstable
+    return steps / (time.perf_counter() - start), steps / max(time.process_time() - cpu, 1e-9), unstable
 
 
 def run(args: argparse.Namespace) -> int:
@@ -48,13 +48,15 @@ def run(args: argparse.Namespace) -> int:
         env = make(args.task)
     try:
         physics = env.unwrapped.config.physics
-        state_rate, unstable = _rate(env, args.steps, render=False)
-        render_rate, _ = _rate(env, args.render_steps, render=True)
+        state_rate, state_cpu_rate, unstable = _rate(env, args.steps, render=False)
+        render_rate, render_cpu_rate, _ = _rate(env, args.render_steps, render=True)
     finally:
         env.close()
     results = {
         "env_steps_per_s": state_rate,
         "render_env_steps_per_s": render_rate,
+        "env_steps_per_cpu_s": state_cpu_rate,
+        "render_env_steps_per_cpu_s": render_cpu_rate,
         "task": args.task,
         "steps": args.steps,
         "sim_unstable_steps": unstable,
@@ -65,8 +67,14 @@ def run(args: argparse.Namespace) -> int:
         "cpus_allowed": len(os.sched_getaffinity(0)),
         "load_average_1min": os.getloadavg()[0],
     }
-    print(f"state-only:      {state_rate:8.1f} env steps/s ({args.steps} steps, resets included)")
-    print(f"with rendering:  {render_rate:8.1f} env steps/s ({args.render_steps} steps)")
+    print(
+        f"state-only:      {state_rate:8.1f} env steps/s wall, {state_cpu_rate:8.1f} per CPU-second "
+        f"({args.steps} steps, resets included)"
+    )
+    print(
+        f"with rendering:  {render_rate:8.1f} env steps/s wall, {render_cpu_rate:8.1f} per CPU-second "
+        f"({args.render_steps} steps)"
+    )
     print(
         f"settings: {physics.substeps} substeps x {physics.time_step_s:.5f} s, {physics.solver_iterations} solver "
         f"iterations, {results['tissue_resolution']}x{results['tissue_resolution']} flap; unstable steps: {unstable}; "
