@@ -52,7 +52,7 @@ class PhysicsParams:
     substeps: int = 12
     solver_iterations: int = 10
     settle_s: float = 0.25
-    control_period_s: float = 1.0 / 60.0
+    control_period_s: float = 1.0 / 120.0
 
     def __post_init__(self) -> None:
         if not 0 < self.time_step_s <= 0.01:
