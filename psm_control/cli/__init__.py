@@ -24,7 +24,7 @@ EXIT_NOT_BUILT = 3
 
 #: Every subcommand of the interface, with a one-line summary.
 SUBCOMMANDS = {
-    "demo": "run the simulation's demo (today: the PSM's kinematics, cross-checked)",
+    "demo": "run the scripted expert in the simulation, record demonstrations or a video; check kinematics",
     "train": "train a policy (DDPG+HER, SQIL, DDPGBC, CoL, DEX) on a task",
     "evaluate": "evaluate a policy through the safety chain",
     "deploy": "deploy a policy to the simulation or a dVRK over ROS 2",

@@ -1,0 +1,140 @@
+"""Robustness sweeps: one policy, many episodes, each under its own sampled conditions.
+
+A sweep parameter is either a randomization parameter of the simulation (passed to
+``reset(options=...)``; multipliers of ``x`` ranges apply to the middle of its default range) or a
+disturbance in the manner of safe-control-gym (white noise, an impulse or a step on the observation
+or the action, and action latency). Short names stand for the common ones (``stiffness``, ``size``,
+``obs_noise``, ``latency``...). :func:`robustness_episode` is the sweep worker: it runs in a worker
+process, keeps its environment and policy between trials, and returns one JSON-ready outcome.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from sim.disturbances import Disturbance, DisturbanceWrapper
+from sim.randomization import DEFAULT_RANGES, INTEGER_PARAMETERS
+
+__all__ = ["ALIASES", "DISTURBANCE_PARAMETERS", "episode_options", "robustness_episode", "sweep_parameters"]
+
+#: Short names accepted on the command line.
+ALIASES: dict[str, str] = {
+    "stiffness": "tissue_stiffness_n_per_m",
+    "damping": "tissue_damping",
+    "mass": "tissue_mass_kg",
+    "size": "tissue_size_m",
+    "gravity": "gravity_m_s2",
+    "friction": "grip_friction",
+    "obs_noise": "observation_noise_m",
+    "latency": "action_latency_steps",
+}
+
+#: Disturbances (safe-control-gym style), all sampled per trial. Observation offsets are in metres
+#: (the observation is positions in metres), action offsets in normalised action units.
+DISTURBANCE_PARAMETERS: dict[str, str] = {
+    "obs_white_m": "white noise on the observation vector, standard deviation [m]",
+    "obs_impulse_m": "impulse on the observation for 3 steps from step 10 [m]",
+    "obs_step_m": "step offset on the observation from step 10 [m]",
+    "action_white": "white noise on the action, standard deviation [action units]",
+    "action_impulse": "impulse on the action for 3 steps from step 10 [action units]",
+    "action_step": "step offset on the action from step 10 [action units]",
+}
+
+_IMPULSE_START, _IMPULSE_STEPS = 10, 3
+
+
+def sweep_parameters() -> tuple[str, ...]:
+    """Every name a sweep can vary: randomization parameters, their short names, disturbances."""
+    return (*ALIASES, *DEFAULT_RANGES, *DISTURBANCE_PARAMETERS)
+
+
+def nominal(name: str) -> float:
+    """The nominal value of a randomization parameter: the middle of its default range."""
+    low, high = DEFAULT_RANGES[ALIASES.get(name, name)]
+    return (low + high) / 2.0
+
+
+def episode_options(params: Mapping[str, float], relative: Mapping[str, bool]) -> dict[str, float]:
+    """The ``reset`` options of a trial: its randomization parameters as absolute values."""
+    options: dict[str, float] = {}
+    for name, value in params.items():
+        if name in DISTURBANCE_PARAMETERS:
+            continue
+        full = ALIASES.get(name, name)
+        absolute = value * nominal(full) if relative.get(name, False) else value
+        options[full] = float(round(absolute)) if full in INTEGER_PARAMETERS else float(absolute)
+    return options
+
+
+def _disturbances(params: Mapping[str, float]) -> tuple[tuple[Disturbance, ...], tuple[Disturbance, ...]]:
+    """The observation and action disturbances a trial's parameters ask for."""
+
+    def make(prefix: str, unit: str) -> tuple[Disturbance, ...]:
+        made = []
+        if params.get(f"{prefix}_white{unit}", 0.0) > 0.0:
+            made.append(Disturbance("white_noise", params[f"{prefix}_white{unit}"]))
+        if params.get(f"{prefix}_impulse{unit}", 0.0) > 0.0:
+            made.append(Disturbance("impulse", params[f"{prefix}_impulse{unit}"], _IMPULSE_START, _IMPULSE_STEPS))
+        if params.get(f"{prefix}_step{unit}", 0.0) > 0.0:
+            made.append(Disturbance("step", params[f"{prefix}_step{unit}"], _IMPULSE_START))
+        return tuple(made)
+
+    return make("obs", "_m"), make("action", "")
+
+
+_CACHE: dict[tuple[Any, ...], Any] = {}
+
+
+def _environment(task: str, safety: bool, safety_config: Mapping[str, Any] | None) -> Any:
+    key = ("env", task, safety, tuple(sorted((safety_config or {}).items())))
+    if key not in _CACHE:
+        from sim.envs import make
+
+        kwargs: dict[str, Any] = {"safety": safety}
+        if safety_config:
+            from safety.config import SafetyConfig
+
+            kwargs["safety_config"] = SafetyConfig(**dict(safety_config))
+        for old in [k for k in _CACHE if k[0] == "env"]:
+            _CACHE.pop(old).close()  # one environment (one physics client) per worker process
+        _CACHE[key] = make(task, **kwargs)
+    return _CACHE[key]
+
+
+def robustness_episode(
+    trial: Mapping[str, Any],
+    *,
+    policy: str,
+    task: str,
+    relative: Mapping[str, bool],
+    safety: bool = True,
+    safety_config: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Run one trial of a sweep and return its outcome (the worker of :func:`sim.sweep.run_trials`).
+
+    Args:
+        trial: ``{"index", "seed", "params"}``.
+        policy: ``scripted``, ``random``, ``module:callable`` or a checkpoint path.
+        task: Task id.
+        relative: Which parameters are multipliers of their nominal value.
+        safety: Run the safety filter (False only for ablations).
+        safety_config: Keyword overrides of :class:`safety.config.SafetyConfig` for this sweep.
+    """
+    from sim.evaluation import resolve_policy, run_episode
+
+    params = {str(k): float(v) for k, v in trial["params"].items()}
+    env = _environment(task, safety, safety_config)
+    policy_key = ("policy", policy, id(env))
+    if policy_key not in _CACHE:
+        _CACHE[policy_key] = resolve_policy(policy, env)
+    policy_fn, policy_reset = _CACHE[policy_key]
+    observation_disturbances, action_disturbances = _disturbances(params)
+    wrapped = DisturbanceWrapper(env, observation=observation_disturbances, action=action_disturbances)
+    options = episode_options(params, relative)
+    result = run_episode(wrapped, policy_fn, policy_reset, int(trial["seed"]), options=options)
+    outcome = result.to_dict()
+    outcome.pop("seed", None)
+    outcome["interventions"] = {"total": int(result.interventions)}
+    outcome["options"] = options
+    return outcome

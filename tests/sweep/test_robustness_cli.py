@@ -1,0 +1,85 @@
+"""`tissue-retract robustness` end to end on the real simulation, as a user runs it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def _robustness(out: Path, *extra: str) -> subprocess.CompletedProcess[str]:
+    command = [
+        sys.executable,
+        "-m",
+        "psm_control",
+        "robustness",
+        "--policy",
+        "scripted",
+        "--task",
+        "lift",
+        "--trials",
+        "4",
+        "--vary",
+        "stiffness=0.5:2x,obs_white_m=0:0.001",
+        "--jobs",
+        "2",
+        "--out",
+        str(out),
+        "--no-progress",
+        *extra,
+    ]
+    return subprocess.run(command, capture_output=True, text=True, timeout=600, check=False)
+
+
+def test_sweep_writes_episodes_report_and_plots_then_resumes(tmp_path: Path) -> None:
+    """A sweep writes one JSON line per episode, a summary, a report and non-blank plots; a rerun skips all."""
+    import matplotlib.image
+
+    result = _robustness(tmp_path)
+    assert result.returncode == 0, result.stderr
+    lines = [json.loads(line) for line in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    assert sorted(r["index"] for r in lines) == [0, 1, 2, 3]
+    for record in lines:
+        assert {"success", "peak_force_n", "failure_class", "params", "options", "seed"} <= record.keys()
+        assert 0.5 <= record["params"]["stiffness"] <= 2.0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["episodes"] == 4 and summary["errors"] == 0
+    for name in ("success_vs_stiffness.png", "success_vs_obs_white_m.png", "peak_force_histogram.png"):
+        pixels = matplotlib.image.imread(tmp_path / name)[..., :3]
+        assert pixels.std() > 0.05, name
+        assert (np.abs(pixels[..., 0] - pixels[..., 2]) > 0.3).mean() > 0.001, name
+    assert "data:image/png;base64" in (tmp_path / "report.html").read_text()
+    again = _robustness(tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert json.loads((tmp_path / "summary.json").read_text())["episodes_run_now"] == 0
+    assert len((tmp_path / "episodes.jsonl").read_text().splitlines()) == 4
+
+
+def test_unknown_parameter_is_refused_with_valid_names(tmp_path: Path) -> None:
+    """Varying a parameter the simulation lacks fails before any episode runs, naming the valid ones."""
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "psm_control",
+            "robustness",
+            "--policy",
+            "scripted",
+            "--task",
+            "lift",
+            "--vary",
+            "stifness=1:2",
+            "--out",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert result.returncode == 1
+    assert "stiffness" in result.stderr and "tissue_size_m" in result.stderr
+    assert not (tmp_path / "episodes.jsonl").exists()
