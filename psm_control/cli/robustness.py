@@ -54,20 +54,14 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.set_defaults(func=run)
 
 
-def _safety_overrides(path: Path | None) -> dict[str, object] | None:
+def safety_overrides(path: Path | None) -> dict[str, object] | None:
+    """The settings of a SafetyConfig file that differ from the defaults (None without a file)."""
     if path is None:
         return None
-    import dataclasses
-
     from safety.config import SafetyConfig, load_safety_config
 
-    loaded = load_safety_config(path)
-    default = SafetyConfig()
-    return {
-        f.name: getattr(loaded, f.name)
-        for f in dataclasses.fields(loaded)
-        if getattr(loaded, f.name) != getattr(default, f.name)
-    }
+    defaults = SafetyConfig().to_dict()
+    return {k: v for k, v in load_safety_config(path).to_dict().items() if v != defaults[k]}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -92,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         "task": task_id,
         "relative": {r.name: r.relative for r in ranges},
         "safety": not args.no_safety,
-        "safety_config": _safety_overrides(args.safety_config),
+        "safety_config": safety_overrides(args.safety_config),
     }
     started = time.perf_counter()
     records = run_trials(

@@ -1,0 +1,180 @@
+"""``tissue-retract tune-safety``: sweep safety settings, show success against peak force, recommend one.
+
+Every setting of the ``--grid`` runs the same ``--episodes`` seeds through the full chain. The output
+folder gets ``episodes.jsonl`` (resumable), ``settings.md`` (every setting, Pareto front marked),
+``pareto.png`` and ``recommended_safety.yaml``: the most successful setting whose largest peak force
+stayed under ``--max-force-n``, loadable with ``--safety-config``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from sim.tuning import SettingResult
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the subcommand."""
+    parser = subparsers.add_parser(
+        "tune-safety",
+        help="sweep safety limits and recommend a configuration",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
+    parser.add_argument("--task", required=True, help="task id")
+    parser.add_argument(
+        "--grid",
+        required=True,
+        help="comma-separated SETTING=LOW:HIGH (or LOW:HIGHx of the default), e.g. force_limit_n=0.5:3,cbf_gamma=0.2:1",
+    )
+    parser.add_argument("--levels", type=int, default=4, help="values per setting (default 4)")
+    parser.add_argument("--episodes", type=int, default=20, help="episodes per setting (default 20)")
+    parser.add_argument(
+        "--max-force-n",
+        type=float,
+        default=None,
+        help="peak-force bound for the recommendation [N] (default: the default force limit)",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the episodes (default 0)")
+    parser.add_argument("--backend", choices=("local", "ray"), default="local", help="execution backend")
+    parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
+    parser.add_argument("--safety-config", type=Path, default=None, help="base SafetyConfig file")
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/tune-safety-TASK)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.set_defaults(func=run)
+
+
+def _plot(
+    results: list[SettingResult], front: list[SettingResult], chosen: SettingResult | None, bound: float, path: Path
+) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(5.5, 3.8), dpi=110)
+    axis.scatter(
+        [r.max_peak_force_n for r in results],
+        [100 * r.success_rate for r in results],
+        color="tab:gray",
+        label="settings",
+    )
+    axis.plot(
+        [r.max_peak_force_n for r in front],
+        [100 * r.success_rate for r in front],
+        "o-",
+        color="tab:blue",
+        label="Pareto front",
+    )
+    if chosen is not None:
+        axis.scatter(
+            [chosen.max_peak_force_n],
+            [100 * chosen.success_rate],
+            s=160,
+            facecolors="none",
+            edgecolors="tab:green",
+            linewidths=2,
+            label="recommended",
+        )
+    axis.axvline(bound, color="red", linestyle="--", label=f"bound {bound:g} N")
+    axis.set_xlabel("largest peak retraction force over the episodes [N]")
+    axis.set_ylabel("success [%]")
+    axis.set_ylim(-5, 105)
+    axis.grid(alpha=0.3)
+    axis.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path)
+    plt.close(figure)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the sweep, write the table, plot and recommended configuration."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from psm_control.cli.robustness import safety_overrides
+    from safety.config import SafetyConfig
+    from sim.envs import gym_id
+    from sim.sweep import EpisodeStore, parse_ranges, run_trials
+    from sim.tuning import pareto_front, recommend, setting_results, tunable_fields, tuning_trials, write_config
+
+    task_id = gym_id(args.task)
+    ranges = parse_ranges(args.grid, valid_names=tunable_fields())
+    base = safety_overrides(args.safety_config) or {}
+    bound = (
+        args.max_force_n if args.max_force_n is not None else SafetyConfig.from_mapping(base).effective_force_limit_n
+    )
+    trials = tuning_trials(ranges, args.levels, args.episodes, seed=args.seed)
+    out = args.out or Path("runs") / f"tune-safety-{task_id}"
+    out.mkdir(parents=True, exist_ok=True)
+    records = run_trials(
+        trials,
+        "sim.tuning:tuning_episode",
+        store=EpisodeStore(out / "episodes.jsonl"),
+        backend=args.backend,
+        jobs=args.jobs,
+        show_progress=not args.no_progress,
+        worker_kwargs={"policy": args.policy, "task": task_id, "base_config": base},
+    )
+    results = setting_results(records, args.episodes)
+    front = pareto_front(results)
+    chosen = recommend(results, bound)
+    names = [r.name for r in ranges]
+    lines = [
+        f"# Safety tuning of {args.policy} on {task_id}",
+        "",
+        f"- grid: {args.grid} ({args.levels} levels), {args.episodes} episodes per setting, seed {args.seed}",
+        f"- peak-force bound: {bound:g} N",
+        "",
+        "| " + " | ".join(names) + " | success % | 95 % CI | max peak force [N] | mean peak force [N] | "
+        "interventions | Pareto |",
+        "|" + "---|" * (len(names) + 6),
+    ]
+    table = Table(title=f"tune-safety: {args.policy} on {task_id} (bound {bound:g} N)")
+    for column in [*names, "success %", "max peak N", "Pareto"]:
+        table.add_column(column, justify="right")
+    for r in results:
+        low, high = r.ci95
+        mark = ("front" if r in front else "") + (" recommended" if r is chosen else "")
+        values = [f"{r.setting[n]:.4g}" for n in names]
+        lines.append(
+            "| " + " | ".join(values) + f" | {100 * r.success_rate:.0f} | {100 * low:.0f} to "
+            f"{100 * high:.0f} | {r.max_peak_force_n:.3f} | {r.mean_peak_force_n:.3f} | {r.interventions} | "
+            f"{mark} |"
+        )
+        table.add_row(*values, f"{100 * r.success_rate:.0f}", f"{r.max_peak_force_n:.3f}", mark)
+    _plot(results, front, chosen, bound, out / "pareto.png")
+    lines += ["", "![success against peak force](pareto.png)", ""]
+    summary: dict[str, object] = {
+        "task": task_id,
+        "policy": args.policy,
+        "grid": args.grid,
+        "bound_n": bound,
+        "settings": [
+            dict(r.setting, success_rate=r.success_rate, max_peak_force_n=r.max_peak_force_n) for r in results
+        ],
+    }
+    if chosen is not None:
+        note = (
+            f"Recommended by tissue-retract tune-safety for {args.policy} on {task_id}: success "
+            f"{100 * chosen.success_rate:.0f} % over {chosen.episodes} episodes, largest peak force "
+            f"{chosen.max_peak_force_n:.3f} N <= {bound:g} N."
+        )
+        write_config(out / "recommended_safety.yaml", chosen.setting, base, note)
+        lines.append(f"Recommended: {chosen.setting} -> `recommended_safety.yaml`")
+        summary["recommended"] = chosen.setting
+    else:
+        lines.append(f"No setting kept the largest peak force under {bound:g} N; nothing recommended.")
+    (out / "settings.md").write_text("\n".join(lines) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    console = Console(width=110)
+    console.print(table)
+    console.print(lines[-1])
+    return 0 if chosen is not None else 1

@@ -1,0 +1,93 @@
+"""Safety tuning: Pareto front, recommendation, refused settings and the command end to end."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from psm_control.errors import ConfigurationError, UnknownVariantError
+from safety.config import load_safety_config
+from sim.sweep import parse_ranges
+from sim.tuning import SettingResult, pareto_front, recommend, setting_results, tunable_fields, tuning_trials
+
+
+def _result(force_limit: float, successes: int, peak: float) -> SettingResult:
+    return SettingResult({"force_limit_n": force_limit}, 10, successes, peak, peak / 2, 0, 0)
+
+
+def test_pareto_front_keeps_only_undominated_settings() -> None:
+    """A setting beaten on both success and peak force by another is not on the front."""
+    a, b, c, d = _result(1, 5, 0.5), _result(2, 8, 0.9), _result(3, 7, 1.2), _result(4, 8, 1.5)
+    assert pareto_front([a, b, c, d]) == [a, b]
+
+
+def test_recommendation_respects_the_force_bound() -> None:
+    """The recommendation is the most successful setting under the bound, or none when none is under it."""
+    a, b, c = _result(1, 5, 0.5), _result(2, 8, 0.9), _result(3, 10, 1.2)
+    assert recommend([a, b, c], 1.0) is b
+    assert recommend([a, b, c], 2.0) is c
+    assert recommend([a, b, c], 0.4) is None
+
+
+def test_trials_share_seeds_across_settings() -> None:
+    """Every setting runs the same episode seeds (common random numbers) and groups back by setting."""
+    trials = tuning_trials(parse_ranges("force_limit_n=0.5:2,cbf_gamma=0.5:1"), levels=2, episodes=3)
+    assert len(trials) == 12
+    seeds = [[t.seed for t in trials[i : i + 3]] for i in range(0, 12, 3)]
+    assert all(s == seeds[0] for s in seeds)
+    records = [{**t.to_dict(), "success": t.index % 2 == 0, "peak_force_n": 0.1 * t.index} for t in trials]
+    grouped = setting_results(records, episodes=3)
+    assert [g.episodes for g in grouped] == [3, 3, 3, 3]
+    assert grouped[1].setting == trials[3].params and grouped[1].max_peak_force_n == pytest.approx(0.5)
+
+
+def test_invalid_settings_are_refused_before_running() -> None:
+    """A grid value outside the SafetyConfig's allowed range, or an unknown setting, fails up front."""
+    with pytest.raises(ConfigurationError, match="force_limit_n"):
+        tuning_trials(parse_ranges("force_limit_n=0:2"), levels=3, episodes=1)
+    with pytest.raises(UnknownVariantError, match="force_limit_n"):
+        parse_ranges("force_limit=1:2", valid_names=tunable_fields())
+
+
+def test_tune_safety_writes_a_loadable_recommendation(tmp_path: Path) -> None:
+    """The command writes the settings table, a Pareto plot and a recommended config that loads back."""
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "psm_control",
+            "tune-safety",
+            "--policy",
+            "scripted",
+            "--task",
+            "lift",
+            "--grid",
+            "force_limit_n=0.2:2",
+            "--levels",
+            "2",
+            "--episodes",
+            "2",
+            "--jobs",
+            "2",
+            "--max-force-n",
+            "5",
+            "--out",
+            str(tmp_path),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert len(summary["settings"]) == 2
+    config = load_safety_config(tmp_path / "recommended_safety.yaml")
+    assert config.force_limit_n == pytest.approx(summary["recommended"]["force_limit_n"])
+    assert (tmp_path / "pareto.png").stat().st_size > 1000
+    assert "Pareto" in (tmp_path / "settings.md").read_text()
