@@ -48,6 +48,8 @@ class PsmClient(Node):
         arm: Arm name / namespace (``PSM1``, ``PSM2``, ...).
         deadman_timeout_s: Largest age of ``measured_js`` before holding [s].
         on_fault: Called (from the ROS thread) with the status when a hold starts.
+        on_measured: Called (from the ROS thread) with each ``measured_js`` and its arrival time on
+            ``time.perf_counter`` [s], e.g. to record or time the stream.
         node_name: ROS node name; default ``<arm>_client``.
 
     Use as a context manager (or call :meth:`start` and :meth:`close`).
@@ -59,6 +61,7 @@ class PsmClient(Node):
         *,
         deadman_timeout_s: float = 0.1,
         on_fault: Callable[[DeadmanStatus], None] | None = None,
+        on_measured: Callable[[JointState, float], None] | None = None,
         node_name: str | None = None,
     ) -> None:
         self.topics = ArmTopics(arm)
@@ -66,6 +69,7 @@ class PsmClient(Node):
         self._lock = threading.Condition()
         self._deadman = Deadman(timeout_s=deadman_timeout_s)
         self._on_fault = on_fault
+        self._on_measured = on_measured
         self._measured: JointState | None = None
         self._measured_rx_s: float | None = None
         self._setpoint_q: np.ndarray | None = None
@@ -143,6 +147,8 @@ class PsmClient(Node):
 
     # -- callbacks (ROS thread) -------------------------------------------------------------------
     def _on_measured_js(self, message: JointState) -> None:
+        if self._on_measured is not None:
+            self._on_measured(message, time.perf_counter())
         with self._lock:
             self._measured = message
             self._measured_rx_s = time.monotonic()

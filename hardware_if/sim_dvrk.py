@@ -76,6 +76,7 @@ class SimulatedPsm(Node):
         self._homing = False
         self._sample: ArmSample = self.arm_model.reset(self._setpoint_q, self._setpoint_jaw)
         self._last_tick_s = time.monotonic()
+        self._joints_published_s = float("-inf")
 
         state, event = periodic_qos(), event_qos()
         t = self.topics.topic
@@ -228,13 +229,15 @@ class SimulatedPsm(Node):
                     self._homing = False
                     self._set_state("ENABLED", is_homed=True, is_busy=False)
         self._sample = self.arm_model.step(dt)
-        self._publish_joints()
+        if now - self._joints_published_s >= 0.5 * self.period_s:
+            self._publish_joints()
         self._publish_poses_and_force()
 
     def _stamp(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
 
     def _publish_joints(self) -> None:
+        self._joints_published_s = time.monotonic()
         stamp, sample = self._stamp(), self._sample
         self._pub["measured_js"].publish(convert.joint_state(JOINT_NAMES, sample.q, sample.qd, stamp_s=stamp))
         self._pub["setpoint_js"].publish(convert.joint_state(JOINT_NAMES, self._setpoint_q, stamp_s=stamp))

@@ -1,0 +1,125 @@
+"""``tissue-retract bench ros``: the policy -> ``servo_jp`` -> simulated dVRK -> ``measured_js`` round trip.
+
+A ``sim-dvrk`` child process serves PSM1 on a loopback-only domain of this run's own; this process
+streams ``servo_jp`` through a :class:`~hardware_if.psm_client.PsmClient` (deadman included) at each
+rate and times, for every command, its arrival back as a ``measured_js`` that carries it. Each command
+is tagged by a distinct roll angle. It prints p50/p99 latency and the commands never seen back (drops).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from typing import Any
+
+__all__ = ["add_arguments", "run"]
+
+_ROLL0 = -0.5
+_ROLL_STEP = 1e-4
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of the ros target (``--json`` is added by ``bench``)."""
+    parser.add_argument(
+        "--rates", type=float, nargs="+", default=[100.0, 1000.0], help="rates [Hz] (default: 100 1000)"
+    )
+    parser.add_argument("--duration", type=float, default=5.0, help="streaming time per rate [s] (default: 5)")
+
+
+def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str, Any]:
+    import numpy as np
+
+    from hardware_if.psm_client import PsmClient
+    from psm_control.commands import JointCommand
+
+    count = max(1, round(rate_hz * duration_s))
+    sent = np.full(count, np.nan)
+    received = np.full(count, np.nan)
+    lock = threading.Lock()
+
+    def on_measured(message: Any, rx_s: float) -> None:
+        if len(message.position) != 6:
+            return
+        k = round((message.position[3] - _ROLL0) / _ROLL_STEP)
+        with lock:
+            if 0 <= k < count and np.isnan(received[k]):
+                received[k] = rx_s
+
+    command = [sys.executable, "-m", "psm_control", "sim-dvrk", "--rate", f"{rate_hz:g}"]
+    command += ["--domain-id", env["ROS_DOMAIN_ID"]]
+    sim = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    holds = 0
+    try:
+        with PsmClient("PSM1", on_measured=on_measured) as psm:
+            psm.wait_for_measurement(timeout_s=60.0)
+            psm.home(timeout_s=20.0)
+            psm.move_jp(np.array([0.0, 0.0, 0.12, _ROLL0, 0.0, 0.0]))
+            time.sleep(1.5)
+            base = psm.measure().q
+            zeros = np.zeros(6)
+            period = 1.0 / rate_hz
+            start = time.perf_counter()
+            for k in range(count):
+                target = start + k * period
+                while (now := time.perf_counter()) < target:
+                    time.sleep(min(target - now, 0.0005))
+                q = base.copy()
+                q[3] = _ROLL0 + _ROLL_STEP * k
+                sent[k] = time.perf_counter()
+                psm.servo_jp(JointCommand(q, zeros, zeros, 0.0, sent[k]))
+                holds += int(psm.status.holding)
+            time.sleep(0.5)
+            achieved_hz = (count - 1) / (sent[-1] - sent[0]) if count > 1 else rate_hz
+    finally:
+        sim.terminate()
+        try:
+            sim.wait(timeout=10.0)
+        except subprocess.TimeoutExpired:
+            sim.kill()
+    with lock:
+        latency_ms = (received - sent)[~np.isnan(received)] * 1000.0
+    return {
+        "rate_hz": rate_hz,
+        "achieved_send_rate_hz": float(achieved_hz),
+        "commands": count,
+        "drops": int(count - latency_ms.size),
+        "held_commands": holds,
+        "p50_ms": float(np.percentile(latency_ms, 50)) if latency_ms.size else None,
+        "p99_ms": float(np.percentile(latency_ms, 99)) if latency_ms.size else None,
+        "max_ms": float(latency_ms.max()) if latency_ms.size else None,
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    """Measure and print the round trip at each rate."""
+    from hardware_if.network import apply_local_ros_env, run_domain_id
+
+    apply_local_ros_env(run_domain_id())
+    from hardware_if.session import ros_session
+
+    env = dict(os.environ)
+    results = []
+    with ros_session():
+        for rate in args.rates:
+            result = _stream(rate, args.duration, env)
+            results.append(result)
+            p50, p99 = result["p50_ms"], result["p99_ms"]
+            print(
+                f"{rate:7.0f} Hz: {result['commands']:6d} commands, drops {result['drops']}, "
+                f"p50 {p50 if p50 is None else f'{p50:.3f}'} ms, p99 {p99 if p99 is None else f'{p99:.3f}'} ms, "
+                f"max {result['max_ms']:.3f} ms (sent at {result['achieved_send_rate_hz']:.1f} Hz)"
+            )
+    report = {
+        "benchmark": "ros round trip: servo_jp -> sim-dvrk (kinematic) -> measured_js, loopback UDPv4",
+        "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
+        "results": results,
+    }
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(report, f, indent=2)
+    return 0

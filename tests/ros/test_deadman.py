@@ -1,0 +1,68 @@
+"""The client-side deadman's rules, one at a time (no ROS needed for the decision itself)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hardware_if.deadman import ArmFacts, Deadman
+from psm_control.errors import ConfigurationError
+
+Q = np.array([0.1, -0.1, 0.12, 0.0, 0.2, -0.2])
+
+
+def _facts(**changes: object) -> ArmFacts:
+    facts = ArmFacts(
+        now_s=10.0, measured_rx_s=9.99, publishers=1, state="ENABLED", is_homed=True, measured_q=Q, setpoint_q=Q
+    )
+    return facts._replace(**changes)
+
+
+def test_fresh_enabled_homed_tracking_arm_is_ok() -> None:
+    """A fresh, present, ENABLED, homed arm that tracks its set-point may be commanded."""
+    status = Deadman().update(_facts())
+    assert status.ok and not status.holding and status.reason == ""
+
+
+@pytest.mark.parametrize(
+    ("changes", "prefix"),
+    [
+        ({"measured_rx_s": 9.5}, "stale"),
+        ({"publishers": 0}, "publisher gone"),
+        ({"measured_rx_s": None, "measured_q": None}, "no measurement"),
+        ({"state": "DISABLED"}, "not ready"),
+        ({"state": "FAULT"}, "not ready"),
+        ({"is_homed": False}, "not ready"),
+        ({"setpoint_q": Q + np.array([0, 0, 0.051, 0, 0, 0])}, "tracking error: insertion"),
+        ({"setpoint_q": Q + np.array([0.51, 0, 0, 0, 0, 0])}, "tracking error: yaw"),
+        ({"setpoint_q": Q + np.array([0, 0, 0, 0, 0, 0.61])}, "tracking error: wrist_yaw"),
+    ],
+)
+def test_each_fault_latches_a_hold_with_its_reason(changes: dict[str, object], prefix: str) -> None:
+    """Each fault trips a hold naming it, and the hold stays after the fault clears until released."""
+    deadman = Deadman()
+    status = deadman.update(_facts(**changes))
+    assert status.holding and not status.ok and status.reason.startswith(prefix), status
+    assert deadman.update(_facts()).holding
+    assert not deadman.release(_facts()).holding
+
+
+def test_tracking_within_dvrk_tolerances_does_not_trip() -> None:
+    """Errors just inside the dVRK's tolerances (0.5 rad, 0.05 m, 0.6 rad) do not trip."""
+    setpoint = Q + np.array([0.49, -0.49, 0.049, 0.59, -0.59, 0.59])
+    assert Deadman().update(_facts(setpoint_q=setpoint)).ok
+
+
+def test_release_keeps_holding_while_a_fault_remains() -> None:
+    """release() does not clear a hold while a rule still fails."""
+    deadman = Deadman()
+    deadman.update(_facts(publishers=0))
+    assert deadman.release(_facts(state="DISABLED")).holding
+
+
+def test_bad_settings_are_rejected() -> None:
+    """A non-positive timeout or a malformed tolerance is a ConfigurationError naming the field."""
+    with pytest.raises(ConfigurationError, match="timeout_s"):
+        Deadman(timeout_s=0.0)
+    with pytest.raises(ConfigurationError, match="tracking_tolerance"):
+        Deadman(tracking_tolerance=np.ones(3))

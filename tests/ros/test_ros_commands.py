@@ -1,0 +1,34 @@
+"""Smoke runs of the ROS subcommands as a user types them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+
+def _cli(env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "psm_control", *args], env=env, capture_output=True, text=True, timeout=300, check=False
+    )
+
+
+def test_sim_dvrk_task_says_not_available(ros_env: dict[str, str]) -> None:
+    """sim-dvrk --task fails with a clear not-available message instead of serving a made-up scene."""
+    result = _cli(ros_env, "sim-dvrk", "--task", "1", "--domain-id", ros_env["ROS_DOMAIN_ID"])
+    assert result.returncode != 0
+    assert "not available" in result.stderr
+    assert result.stdout == ""
+
+
+def test_bench_ros_prints_latency_and_drops(ros_env: dict[str, str], tmp_path: Path) -> None:
+    """bench ros prints p50/p99 and drops per rate and writes them as JSON (numbers are not asserted)."""
+    out = tmp_path / "bench.json"
+    result = _cli(ros_env, "bench", "ros", "--rates", "100", "--duration", "0.5", "--json", str(out))
+    assert result.returncode == 0, result.stderr
+    assert "p50" in result.stdout and "p99" in result.stdout and "drops" in result.stdout
+    report = json.loads(out.read_text())
+    (row,) = report["results"]
+    assert row["rate_hz"] == 100.0 and row["commands"] == 50
+    assert {"p50_ms", "p99_ms", "drops"} <= set(row)
