@@ -59,12 +59,18 @@ class CommandVerifier:
         self._q_full = np.zeros(self._model.nq)
         self._tip = configuration.model.frame_ids.tool_tip
         self._base = configuration.base_frame
+        self.last_safe: JointCommand | None = None
+        self.stops = 0
+        # One comparison checks every joint's position, velocity and acceleration (and finiteness: NaN
+        # fails it); only a command that fails it goes through the per-check path that names the cause.
+        lower = self.lower.copy()
+        lower[2] = max(lower[2], self.min_insertion_m)
+        self._center = np.concatenate([(lower + self.upper) / 2.0, np.zeros(2 * lower.size)])
+        self._half_width = np.concatenate([(self.upper - lower) / 2.0 + tolerance, self.velocity, self.acceleration])
 
     def set_base_frame(self, transform_rcm_to_base: np.ndarray) -> None:
         """Use a new base frame (4x4 pose of the RCM) for the workspace check."""
         self._base = np.array(transform_rcm_to_base, dtype=float)
-        self.last_safe: JointCommand | None = None
-        self.stops = 0
 
     def reset(self, command: JointCommand) -> None:
         """Accept ``command`` as the safe command to hold (the measured state at reset)."""
@@ -80,6 +86,12 @@ class CommandVerifier:
     def problem(self, command: JointCommand) -> str:
         """Return what is wrong with ``command`` ("" if nothing)."""
         q, qd, qdd = command.q, command.qd, command.qdd
+        try:
+            joints_ok = bool((np.abs(np.concatenate((q, qd, qdd)) - self._center) <= self._half_width).all())
+        except ValueError:  # wrong shapes: the detailed checks say which
+            joints_ok = False
+        if joints_ok and np.isfinite(command.jaw):
+            return self._workspace_problem(q)
         for name, vector in (("q", q), ("qd", qd), ("qdd", qdd)):
             if vector.shape != self.lower.shape or not np.all(np.isfinite(vector)):
                 return f"{name} is not a finite vector of {self.lower.size}"
@@ -101,9 +113,13 @@ class CommandVerifier:
         if np.any(hard):
             i = int(np.argmax(hard))
             return f"joint {_NAMES[i]} acceleration {qdd[i]:.6g} beyond limit {self.acceleration[i]:.6g}"
+        return self._workspace_problem(q)
+
+    def _workspace_problem(self, q: np.ndarray) -> str:
         self._q_full[: q.size] = q
-        pin.framesForwardKinematics(self._model, self._data, self._q_full)
-        tip = self._base[:3, :3] @ self._data.oMf[self._tip].translation + self._base[:3, 3]
+        pin.forwardKinematics(self._model, self._data, self._q_full)
+        tip = self._base[:3, :3] @ pin.updateFramePlacement(self._model, self._data, self._tip).translation
+        tip += self._base[:3, 3]
         outside = (tip < self.box_lower) | (tip > self.box_upper)
         if np.any(outside):
             i = int(np.argmax(outside))

@@ -26,6 +26,7 @@ class JointAccelerationLimit(Limit):
     """
 
     name = "joint_acceleration"
+    joint_bounds = True
 
     def __init__(
         self, acceleration_limit: np.ndarray, max_step: np.ndarray, lower: np.ndarray, upper: np.ndarray
@@ -37,6 +38,7 @@ class JointAccelerationLimit(Limit):
         self.rows = self.acceleration.size
         self._G = np.zeros((self.rows, self.rows))
         self._h = np.full(self.rows, np.inf)
+        self._half_inverse = 0.5 / self.acceleration
 
     def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
         """Row ``-sign(qd_i) dq_i <= -min(qd_i^2 / (2 a_i), step_i, room_i)`` per moving joint."""
@@ -46,3 +48,10 @@ class JointAccelerationLimit(Limit):
         distance = np.minimum(np.minimum(state.qd**2 / (2.0 * self.acceleration), self.max_step), room)
         self._h[:] = np.where(direction != 0.0, -np.maximum(distance, 0.0), np.inf)
         return self._G, self._h
+
+    def compute_joint_bounds(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
+        """``dq_i >= d_i`` for a joint moving up, ``dq_i <= -d_i`` moving down; ``d_i`` as in the rows."""
+        qd = state.qd
+        room = np.where(qd > 0.0, self.upper - state.q, state.q - self.lower)
+        distance = np.maximum(np.minimum(np.minimum(qd * qd * self._half_inverse, self.max_step), room), 0.0)
+        return np.where(qd > 0.0, distance, -np.inf), np.where(qd < 0.0, -distance, np.inf)

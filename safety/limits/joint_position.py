@@ -24,6 +24,7 @@ class JointPositionLimit(Limit):
     """
 
     name = "joint_position"
+    joint_bounds = True
 
     def __init__(self, lower: np.ndarray, upper: np.ndarray, margin: np.ndarray) -> None:
         self.lower = np.asarray(lower, dtype=float) + np.asarray(margin, dtype=float)
@@ -36,3 +37,7 @@ class JointPositionLimit(Limit):
         """Rows ``dq <= max(upper - q, 0)`` and ``-dq <= max(q - lower, 0)``."""
         h = np.concatenate([np.maximum(self.upper - state.q, 0.0), np.maximum(state.q - self.lower, 0.0)])
         return self._G, h
+
+    def compute_joint_bounds(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
+        """``-max(q - lower, 0) <= dq <= max(upper - q, 0)``."""
+        return np.minimum(self.lower - state.q, 0.0), np.maximum(self.upper - state.q, 0.0)

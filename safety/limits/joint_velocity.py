@@ -22,6 +22,7 @@ class JointVelocityLimit(Limit):
     """
 
     name = "joint_velocity"
+    joint_bounds = True
 
     def __init__(self, velocity_limit: np.ndarray, horizon_s: float) -> None:
         self.step = np.asarray(velocity_limit, dtype=float) * horizon_s
@@ -29,7 +30,12 @@ class JointVelocityLimit(Limit):
         self.rows = 2 * dof
         self._G = np.vstack([np.eye(dof), -np.eye(dof)])
         self._h = np.concatenate([self.step, self.step])
+        self._lower = -self.step
 
     def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
         """Rows ``dq <= step`` and ``-dq <= step``."""
         return self._G, self._h
+
+    def compute_joint_bounds(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
+        """``-step <= dq <= step``."""
+        return self._lower, self.step

@@ -67,16 +67,39 @@ class Limit(abc.ABC):
         soft: Soft limits get a slack variable with a large penalty; hard limits must hold after the solve.
         rows: Number of inequality rows this limit always returns.
         penalty_scale: Multiplies the filter's slack penalty for a soft limit (its priority).
+        joint_bounds: Every row involves one joint at most (``G`` rows are multiples of unit vectors), so
+            the filter may merge the rows into per-joint bounds instead of giving each its own row.
     """
 
     name: str = "limit"
     soft: bool = False
     rows: int = 0
     penalty_scale: float = 1.0
+    joint_bounds: bool = False
 
     @abc.abstractmethod
     def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
         """Return ``(G, h)`` with ``G`` of shape (rows, 6) and ``h`` of shape (rows,)."""
+
+    def compute_joint_bounds(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
+        """Return per-joint ``(lower, upper)`` on ``dq`` that say the same as the rows (``joint_bounds`` only).
+
+        The filter merges these into one pair of bounds per joint. This generic form derives them from
+        :meth:`compute_qp_inequalities`; subclasses override it with the direct formula (tested equal).
+
+        Raises:
+            ValueError: A row involves more than one joint, or a row ``0 <= h`` has ``h < 0``.
+        """
+        G, h = self.compute_qp_inequalities(state)
+        if np.any(np.count_nonzero(G, axis=1) > 1):
+            raise ValueError(f"{self.name}: a row involves more than one joint")
+        if np.any(h[~np.any(G != 0.0, axis=1)] < 0.0):
+            raise ValueError(f"{self.name}: a row 0 <= h has h < 0 (no displacement meets it)")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = h[:, None] / G
+        upper = np.min(np.where(G > 0.0, ratio, np.inf), axis=0, initial=np.inf)
+        lower = np.max(np.where(G < 0.0, ratio, -np.inf), axis=0, initial=-np.inf)
+        return lower, upper
 
     def report(
         self, G: np.ndarray, h: np.ndarray, dq_nominal: np.ndarray, dq: np.ndarray, tolerance: float, slack: float = 0.0

@@ -24,6 +24,7 @@ class RcmInsertionLimit(Limit):
     """
 
     name = "rcm_insertion"
+    joint_bounds = True
     rows = 1
 
     def __init__(self, min_insertion_m: float, dof: int = 6) -> None:
@@ -31,8 +32,15 @@ class RcmInsertionLimit(Limit):
         self._G = np.zeros((1, dof))
         self._G[0, _INSERTION] = -1.0
         self._h = np.zeros(1)
+        self._lower = np.full(dof, -np.inf)
+        self._upper = np.full(dof, np.inf)
 
     def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
         """Row ``-dq_2 <= max(q_2 - min_insertion, 0)``."""
         self._h[0] = max(float(state.q[_INSERTION]) - self.min_insertion_m, 0.0)
         return self._G, self._h
+
+    def compute_joint_bounds(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
+        """``dq_2 >= -max(q_2 - min_insertion, 0)``; the other joints are free."""
+        self._lower[_INSERTION] = -max(float(state.q[_INSERTION]) - self.min_insertion_m, 0.0)
+        return self._lower, self._upper
