@@ -12,12 +12,13 @@ turned about the target frame's z axis, and orientation is weighted well below p
 orientation error costs as much as ``orientation_weight`` metres of position error.
 
 The problem is built as a ``qpsolvers.Problem`` (inspectable, and carried by the error when it fails)
-and solved by an OSQP workspace kept between ticks, updated in place each call, unless the unconstrained
-minimiser already satisfies the bounds.
+and solved by an OSQP workspace kept between ticks (:class:`KeptOsqp`, shared with the safety filter),
+updated in place each call, unless the unconstrained minimiser already satisfies the bounds.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -29,9 +30,11 @@ from scipy import sparse
 from psm_control.errors import InfeasibleProblemError
 from psm_control.robot import PsmConfiguration
 
-__all__ = ["DifferentialIk", "IkResult"]
+__all__ = ["DifferentialIk", "IkResult", "KeptOsqp"]
 
 _SOLVED = ("solved", "solved inaccurate")
+_INFINITY = 1e30  # OSQP_INFTY: bounds beyond it are infinite
+_STATUS = {int(v): k.removeprefix("OSQP_").lower().replace("_", " ") for k, v in osqp.SolverStatus.__members__.items()}
 
 
 class IkResult(NamedTuple):
@@ -50,16 +53,66 @@ class IkResult(NamedTuple):
     orientation_error_rad: float
 
 
-def _dense_csc(rows: int, cols: int, *, upper: bool = False) -> sparse.csc_matrix:
-    """A CSC matrix whose every entry (or upper triangle) is a stored element, so updates keep its pattern."""
-    indices: list[int] = []
-    indptr = [0]
-    for col in range(cols):
-        col_rows = range(col + 1) if upper else range(rows)
-        indices.extend(col_rows)
-        indptr.append(len(indices))
-    data = np.zeros(len(indices))
-    return sparse.csc_matrix((data, np.array(indices), np.array(indptr)), shape=(rows, cols))
+class KeptOsqp:
+    """One OSQP workspace with a fixed sparsity pattern: set up on the first solve, then only updated.
+
+    Updates and solves go straight to the compiled solver that ``osqp.OSQP`` wraps when it is there: the
+    wrapper's ``update()`` and ``solve()`` spend about as long in Python (copying every info field into a
+    namespace each call) as the 10-50 ADMM iterations of the control chain's problems take.
+
+    Args:
+        P: Cost matrix pattern (upper triangle, CSC); its values are replaced on every solve that passes ``Px``.
+        A: Constraint matrix pattern (CSC); its values are replaced on every solve that passes ``Ax``.
+        settings: OSQP settings.
+    """
+
+    def __init__(self, P: sparse.csc_matrix, A: sparse.csc_matrix, settings: dict[str, Any]) -> None:
+        self._P = P
+        self._A = A
+        self.settings = settings
+        self._solver: osqp.OSQP | None = None
+        self._direct: Any = None
+
+    def solve(
+        self,
+        q: np.ndarray,
+        lower: np.ndarray,
+        upper: np.ndarray,
+        *,
+        Px: np.ndarray | None = None,
+        Ax: np.ndarray | None = None,
+    ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
+        """Return ``(x, y, status, iterations)`` for this call's data (bounds within +-1e30)."""
+        if self._solver is None:
+            P, A = self._P.copy(), self._A.copy()
+            if Px is not None:
+                P.data[:] = Px
+            if Ax is not None:
+                A.data[:] = Ax
+            self._solver = osqp.OSQP()
+            self._solver.setup(P, q, A, lower, upper, **self.settings)
+            direct = getattr(self._solver, "_solver", None)
+            if all(hasattr(direct, name) for name in ("update_data_vec", "update_data_mat", "solve", "info")):
+                self._direct = direct
+        elif self._direct is not None:
+            self._direct.update_data_vec(q=q, l=lower, u=upper)
+            if Px is not None or Ax is not None:
+                self._direct.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+        else:
+            self._solver.update(
+                q=q,
+                l=lower,
+                u=upper,
+                **({"Px": Px} if Px is not None else {}),
+                **({"Ax": Ax} if Ax is not None else {}),
+            )
+        if self._direct is not None:
+            self._direct.solve()
+            info = self._direct.info
+            status = _STATUS.get(int(info.status_val), "failed")
+            return self._direct.solution.x, self._direct.solution.y, status, int(info.iter)
+        result = self._solver.solve(raise_error=False)
+        return result.x, result.y, str(result.info.status), int(result.info.iter)
 
 
 class DifferentialIk:
@@ -97,15 +150,20 @@ class DifferentialIk:
             "eps_abs": eps_abs,
             "eps_rel": eps_rel,
             "max_iter": max_iter,
-            "polishing": False,
+            "polishing": True,
             "verbose": False,
             "warm_starting": True,
+            "check_termination": 5,
         }
-        self._P_pattern = _dense_csc(dof, dof, upper=True)
+        self._damping = damping * np.eye(dof)
+        self._sqrt_weights = np.sqrt(self.weights)
         self._P_upper = np.triu_indices(dof)
         self._P_order = np.lexsort((self._P_upper[0], self._P_upper[1]))
-        self._A = sparse.identity(dof, format="csc")
-        self._solver: osqp.OSQP | None = None
+        rows, cols = self._P_upper[0][self._P_order], self._P_upper[1][self._P_order]
+        self._Px_index = (rows, cols)  # CSC order of the upper triangle
+        P_pattern = sparse.csc_matrix((np.ones(rows.size), (rows, cols)), shape=(dof, dof))
+        self._qp = KeptOsqp(P_pattern, sparse.identity(dof, format="csc"), self._settings)
+        self._error = np.empty(6)
 
     def errors(self, configuration: PsmConfiguration, goal_local: np.ndarray) -> np.ndarray:
         """Return ``[e_p, e_o]`` (6,): position [m] and orientation [rad] error about the RCM."""
@@ -119,18 +177,15 @@ class DifferentialIk:
         self, configuration: PsmConfiguration, goal_local: np.ndarray, lower: np.ndarray, upper: np.ndarray
     ) -> qpsolvers.Problem:
         """Build the QP for one step (``lower <= dq <= upper``), as an inspectable ``qpsolvers.Problem``."""
-        P, q, _ = self._cost(configuration, goal_local)
+        J = configuration.local_jacobian()
+        P, q = self._cost(J, self.errors(configuration, goal_local))
         return qpsolvers.Problem(P, q, lb=np.asarray(lower, dtype=float), ub=np.asarray(upper, dtype=float))
 
-    def _cost(
-        self, configuration: PsmConfiguration, goal_local: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        J = configuration.local_jacobian()
-        error = self.errors(configuration, goal_local)
+    def _cost(self, J: np.ndarray, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         JW = J.T * self.weights
-        P = JW @ J + self.damping * np.eye(self.dof)
-        q = -JW @ error
-        return P, q, error
+        P = JW @ J
+        P += self._damping
+        return P, -(JW @ error)
 
     def solve(
         self, configuration: PsmConfiguration, goal_local: np.ndarray, lower: np.ndarray, upper: np.ndarray
@@ -147,39 +202,36 @@ class DifferentialIk:
             InfeasibleProblemError: The bounds are inconsistent or the solver did not converge; the
                 error carries the ``qpsolvers.Problem``.
         """
-        P, q, error = self._cost(configuration, goal_local)
+        J = configuration.local_jacobian()
+        error = self.errors(configuration, goal_local)
+        P, q = self._cost(J, error)
         lower = np.asarray(lower, dtype=float)
         upper = np.asarray(upper, dtype=float)
-        if not np.all(lower <= upper):
-            problem = self.problem(configuration, goal_local, lower, upper)
-            raise InfeasibleProblemError("ik", "lower bound above upper bound", problem)
-        # A convex QP's unconstrained minimiser is its solution when it satisfies the bounds: the
-        # common case of a small step, solved by one 6x6 linear solve instead of an ADMM run.
-        dq = None if self.naive else np.linalg.solve(P, -q)
-        if dq is not None and np.all(dq >= lower) and np.all(dq <= upper):
-            status = "solved"
-        elif self.naive:
-            dq = qpsolvers.solve_qp(P, q, lb=lower, ub=upper, solver="osqp", **self._settings)
+        if np.count_nonzero(lower <= upper) != self.dof:
+            raise InfeasibleProblemError(
+                "ik", "lower bound above upper bound", self.problem(configuration, goal_local, lower, upper)
+            )
+        status = "solved"
+        if self.naive:
+            settings = {k: v for k, v in self._settings.items() if k != "warm_starting"}
+            dq = qpsolvers.solve_qp(P, q, lb=lower, ub=upper, solver="osqp", **settings)
             status = "solved" if dq is not None else "failed"
         else:
-            dq, status = self._solve_kept(P, q, lower, upper)
-        if dq is None or status not in _SOLVED or not np.all(np.isfinite(dq)):
+            # A convex QP's unconstrained minimiser is its solution when it satisfies the bounds: the
+            # common case of a small step, solved by one 6x6 linear solve instead of an ADMM run.
+            dq = np.linalg.solve(P, -q)
+            if np.count_nonzero((dq < lower) | (dq > upper)):
+                dq, _, status, _ = self._qp.solve(
+                    q, np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY), Px=P[self._Px_index]
+                )
+        if dq is None or status not in _SOLVED or np.count_nonzero(np.isfinite(dq)) != self.dof:
             raise InfeasibleProblemError("ik", status, self.problem(configuration, goal_local, lower, upper))
-        dq = np.clip(dq, lower, upper)
-        J = configuration.local_jacobian()
-        residual = float(np.linalg.norm(np.sqrt(self.weights) * (J @ dq - error)))
-        return IkResult(dq, residual, float(np.linalg.norm(error[:3])), float(np.linalg.norm(error[3:])))
-
-    def _solve_kept(
-        self, P: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray
-    ) -> tuple[np.ndarray | None, str]:
-        Px = P[self._P_upper][self._P_order]
-        if self._solver is None:
-            P_csc = self._P_pattern.copy()
-            P_csc.data[:] = Px
-            self._solver = osqp.OSQP()
-            self._solver.setup(P_csc, q, self._A, lower, upper, **self._settings)
-        else:
-            self._solver.update(Px=Px, q=q, l=lower, u=upper)
-        result = self._solver.solve(raise_error=False)
-        return result.x, str(result.info.status)
+        dq = np.minimum(np.maximum(dq, lower), upper)
+        weighted = self._sqrt_weights * (J @ dq - error)
+        e = error.tolist()
+        return IkResult(
+            dq,
+            math.sqrt(float(weighted @ weighted)),
+            math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]),
+            math.sqrt(e[3] * e[3] + e[4] * e[4] + e[5] * e[5]),
+        )

@@ -25,18 +25,17 @@ from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-import osqp
 import qpsolvers
 from scipy import sparse
 
 from psm_control.errors import InfeasibleProblemError
+from psm_control.ik import KeptOsqp
 from safety.limits import FilterState, Limit, LimitReport
 
 __all__ = ["FilterResult", "SafetyFilter"]
 
 _INFINITY = 1e30  # OSQP's OSQP_INFTY: bounds beyond it are infinite
 _SOLVED = ("solved", "solved inaccurate")
-_STATUS = {int(v): k.removeprefix("OSQP_").lower().replace("_", " ") for k, v in osqp.SolverStatus.__members__.items()}
 _MIN_ROW_NORM = 1e-9
 
 
@@ -136,7 +135,8 @@ class SafetyFilter:
         hard_pattern, self._hard_Ax, self._hard_G_pos = self._pattern(0)
         self._hard_l = np.full(dof + self.m_rows, -_INFINITY)
         self._hard_u = np.full(dof + self.m_rows, _INFINITY)
-        self._row_penalty = np.where(self._row_slack >= 0, np.r_[self._penalty, 0.0][self._row_slack], 0.0)
+        # A hard row's multiplier may be anything; a soft row's must stay within its slack's penalty.
+        self._row_penalty = np.where(self._row_slack >= 0, np.r_[self._penalty, 0.0][self._row_slack], np.inf)
         self._settings: dict[str, Any] = {
             "eps_abs": eps,
             "eps_rel": eps,
@@ -146,10 +146,11 @@ class SafetyFilter:
             "warm_starting": True,
             "scaling": 0,
             "rho": 1.0,
+            "adaptive_rho_interval": 10,
             "check_termination": 5,
         }
-        self._hard = _KeptQp(np.ones(dof), hard_pattern, self._settings)
-        self._slack = _KeptQp(self._P_diag, self._A_pattern, self._settings)
+        self._hard = KeptOsqp(sparse.identity(dof, format="csc"), hard_pattern, self._settings)
+        self._slack = KeptOsqp(sparse.diags(self._P_diag, format="csc"), self._A_pattern, self._settings)
         self._iterations = 0
 
     def _pattern(self, n_slack: int) -> tuple[sparse.csc_matrix, np.ndarray, np.ndarray]:
@@ -191,7 +192,7 @@ class SafetyFilter:
             self._bound_upper[k] = upper
         lb = self._bound_lower.max(axis=0) / self._scale
         ub = self._bound_upper.min(axis=0) / self._scale
-        if not np.all(lb <= ub + self.hard_tolerance):
+        if np.count_nonzero(lb <= ub + self.hard_tolerance) != self.dof:
             raise InfeasibleProblemError("safety_filter", f"joint bounds conflict: lower {lb} above upper {ub}")
         self._lb = lb
         self._ub = np.maximum(ub, lb)
@@ -239,9 +240,9 @@ class SafetyFilter:
         sigma = np.zeros(self.n_slack)
         solved = False
         self._iterations = 0
-        if self.naive or (self.m_rows and bool(np.any(self._G @ z > self._h))):
+        if self.naive or (self.m_rows and np.count_nonzero(self._G @ z > self._h)):
             x, status = self._solve_naive(dq_nominal) if self.naive else self._solve_kept(z_nominal)
-            if x is None or status not in _SOLVED or not np.all(np.isfinite(x)):
+            if x is None or status not in _SOLVED or np.count_nonzero(np.isfinite(x)) != x.size:
                 raise InfeasibleProblemError("safety_filter", status, self._problem(dq_nominal))
             z = np.minimum(np.maximum(x[: self.dof], self._lb), self._ub)
             sigma = np.maximum(x[self.dof :], 0.0)
@@ -298,23 +299,20 @@ class SafetyFilter:
         u_rows = np.where(live, np.minimum(h, _INFINITY), _INFINITY)
         # First without slack: if the rows can all be met and no multiplier exceeds its penalty, this is
         # exactly the penalised problem's solution (slack zero), and ADMM converges fast on it.
-        self._hard_l[:dof] = self._lb
-        self._hard_u[:dof] = self._ub
+        self._hard_l[:dof] = np.maximum(self._lb, -_INFINITY)
+        self._hard_u[:dof] = np.minimum(self._ub, _INFINITY)
         self._hard_u[dof:] = u_rows
         self._hard_Ax[self._hard_G_pos] = rows.ravel()
         self._q[:dof] = -z_nominal
-        x, y, status, iterations = self._hard.solve(self._q[:dof], self._hard_l, self._hard_u, self._hard_Ax)
+        x, y, status, iterations = self._hard.solve(self._q[:dof], self._hard_l, self._hard_u, Ax=self._hard_Ax)
         self._iterations = iterations
-        if status in _SOLVED and x is not None:
-            multiplier = y[dof:]
-            penalty = self._row_penalty
-            if not np.any(multiplier[~self._hard_row] > penalty[~self._hard_row]):
-                return np.concatenate([x, np.zeros(self.n_slack)]), status
-        self._l[:dof] = self._lb
-        self._u[:dof] = self._ub
+        if status in _SOLVED and x is not None and not np.count_nonzero(y[dof:] > self._row_penalty):
+            return np.concatenate([x, np.zeros(self.n_slack)]), status
+        self._l[:dof] = self._hard_l[:dof]
+        self._u[:dof] = self._hard_u[:dof]
         self._u[first:] = u_rows
         self._Ax[self._G_pos] = rows.ravel()
-        x, _, status, iterations = self._slack.solve(self._q, self._l, self._u, self._Ax)
+        x, _, status, iterations = self._slack.solve(self._q, self._l, self._u, Ax=self._Ax)
         self._iterations += iterations
         return x, status
 
@@ -325,44 +323,3 @@ class SafetyFilter:
             problem.P, problem.q, problem.G, problem.h, lb=problem.lb, ub=problem.ub, solver="osqp", **settings
         )
         return x, "solved" if x is not None else "failed"
-
-
-class _KeptQp:
-    """One OSQP workspace with a fixed sparsity pattern: set up on first use, then only updated.
-
-    Updates and solves go straight to the compiled solver that ``osqp.OSQP`` wraps when it is there: the
-    wrapper's ``update()`` and ``solve()`` spend about as long in Python (copying every info field into a
-    namespace each call) as the 10-50 ADMM iterations of these problems take.
-    """
-
-    def __init__(self, P_diag: np.ndarray, A_pattern: sparse.csc_matrix, settings: dict[str, Any]) -> None:
-        self._P = sparse.diags(P_diag, format="csc")
-        self._A = A_pattern
-        self._settings = settings
-        self._solver: osqp.OSQP | None = None
-        self._direct: Any = None
-
-    def solve(
-        self, q: np.ndarray, lower: np.ndarray, upper: np.ndarray, Ax: np.ndarray
-    ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
-        """Return ``(x, y, status, iterations)`` of the QP with this tick's data (bounds within +-1e30)."""
-        if self._solver is None:
-            A = self._A.copy()
-            A.data[:] = Ax
-            self._solver = osqp.OSQP()
-            self._solver.setup(self._P, q, A, lower, upper, **self._settings)
-            direct = getattr(self._solver, "_solver", None)
-            if all(hasattr(direct, name) for name in ("update_data_vec", "update_data_mat", "solve", "info")):
-                self._direct = direct
-        elif self._direct is not None:
-            self._direct.update_data_vec(q=q, l=lower, u=upper)
-            self._direct.update_data_mat(P_x=None, P_i=None, A_x=Ax, A_i=None)
-        else:
-            self._solver.update(q=q, l=lower, u=upper, Ax=Ax)
-        if self._direct is not None:
-            self._direct.solve()
-            info = self._direct.info
-            status = _STATUS.get(int(info.status_val), "failed")
-            return self._direct.solution.x, self._direct.solution.y, status, int(info.iter)
-        result = self._solver.solve(raise_error=False)
-        return result.x, result.y, str(result.info.status), int(result.info.iter)

@@ -59,19 +59,27 @@ class JointSmoother:
 
     def reset(self, q: np.ndarray) -> SmootherState:
         """Start at rest at ``q``."""
-        self._input.current_position = [float(x) for x in q]
+        self._input.current_position = np.asarray(q, dtype=float).tolist()
         self._input.current_velocity = self._zeros
         self._input.current_acceleration = self._zeros
-        return self.state
+        self._state = self._read_state()
+        return self._state
 
     @property
     def state(self) -> SmootherState:
-        """The current (last output) state."""
-        return SmootherState(
+        """The current (last output) state (treat its arrays as read-only)."""
+        return self._state
+
+    def _read_state(self) -> SmootherState:
+        # Read-only: the same arrays are the next tick's starting state, so nobody may change them.
+        state = SmootherState(
             np.array(self._input.current_position),
             np.array(self._input.current_velocity),
             np.array(self._input.current_acceleration),
         )
+        for array in state:
+            array.flags.writeable = False
+        return state
 
     def step_to(self, goal: np.ndarray) -> SmootherState:
         """Advance one period towards ``goal``, where the joints should come to rest.
@@ -80,7 +88,7 @@ class JointSmoother:
             SafetyStopError: Ruckig rejected the input or failed to compute a trajectory.
         """
         self._input.control_interface = ControlInterface.Position
-        self._input.target_position = [float(x) for x in goal]
+        self._input.target_position = np.asarray(goal, dtype=float).tolist()
         self._input.target_velocity = self._zeros
         self._input.target_acceleration = self._zeros
         return self._update()
@@ -100,4 +108,5 @@ class JointSmoother:
         if result not in (Result.Working, Result.Finished):
             raise SafetyStopError(f"smoother: Ruckig returned {result}")
         self._output.pass_to_input(self._input)
-        return self.state
+        self._state = self._read_state()
+        return self._state

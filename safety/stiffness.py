@@ -8,6 +8,8 @@ it follows tissue that softens or stiffens. The value used is kept within ``[k_m
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["StiffnessEstimator"]
@@ -52,8 +54,8 @@ class StiffnessEstimator:
         """Return to the prior."""
         self._k = self.prior
         self._p = self.prior_variance
-        self._x_ref: np.ndarray | None = None
-        self._f_ref: np.ndarray | None = None
+        self._x_ref: list[float] | None = None
+        self._f_ref: list[float] | None = None
 
     @property
     def value(self) -> float:
@@ -62,23 +64,22 @@ class StiffnessEstimator:
 
     def update(self, tool_position_m: np.ndarray, retraction_force_n: np.ndarray) -> float:
         """Feed one (position, force) sample and return the current estimate [N/m]."""
-        x = np.asarray(tool_position_m, dtype=float)
-        f = np.asarray(retraction_force_n, dtype=float)
-        magnitude = float(np.linalg.norm(f))
-        if magnitude < self.min_force_n or not np.all(np.isfinite(f)) or not np.all(np.isfinite(x)):
-            self._x_ref, self._f_ref = x.copy(), f.copy()
+        x = np.asarray(tool_position_m, dtype=float).tolist()
+        f = np.asarray(retraction_force_n, dtype=float).tolist()
+        magnitude = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        # NaN fails every comparison, so a non-finite sample only moves the reference.
+        finite = math.isfinite(magnitude) and math.isfinite(x[0] + x[1] + x[2])
+        if not (finite and magnitude >= self.min_force_n) or self._x_ref is None or self._f_ref is None:
+            self._x_ref, self._f_ref = x, f
             return self.value
-        if self._x_ref is None or self._f_ref is None:
-            self._x_ref, self._f_ref = x.copy(), f.copy()
-            return self.value
-        n = f / magnitude
-        dx = float(n @ (x - self._x_ref))
+        n = [c / magnitude for c in f]
+        dx = sum(n[i] * (x[i] - self._x_ref[i]) for i in range(3))
         if abs(dx) < self.min_displacement_m:
             return self.value
-        df = float(n @ (f - self._f_ref))
+        df = sum(n[i] * (f[i] - self._f_ref[i]) for i in range(3))
         gain = self._p * dx / (self.forgetting + dx * self._p * dx)
         self._k += gain * (df - dx * self._k)
         self._p = (self._p - gain * dx * self._p) / self.forgetting
-        self._x_ref, self._f_ref = x.copy(), f.copy()
+        self._x_ref, self._f_ref = x, f
         self.updates += 1
         return self.value
