@@ -19,6 +19,7 @@ updated in place each call, unless the unconstrained minimiser already satisfies
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -150,7 +151,7 @@ class DifferentialIk:
             "eps_abs": eps_abs,
             "eps_rel": eps_rel,
             "max_iter": max_iter,
-            "polishing": True,
+            "polishing": False,
             "verbose": False,
             "warm_starting": True,
             "check_termination": 5,
@@ -214,8 +215,14 @@ class DifferentialIk:
         status = "solved"
         if self.naive:
             settings = {k: v for k, v in self._settings.items() if k != "warm_starting"}
-            dq = qpsolvers.solve_qp(P, q, lb=lower, ub=upper, solver="osqp", **settings)
-            status = "solved" if dq is not None else "failed"
+            # solve_problem is what solve_qp wraps; it also says "solved inaccurate", which the kept
+            # workspace accepts too, instead of returning None.
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                solution = qpsolvers.solve_problem(
+                    qpsolvers.Problem(P, q, lb=lower, ub=upper), solver="osqp", **settings
+                )
+            dq, status = solution.x, str(solution.extras["info"].status)
         else:
             # A convex QP's unconstrained minimiser is its solution when it satisfies the bounds: the
             # common case of a small step, solved by one 6x6 linear solve instead of an ADMM run.

@@ -22,7 +22,15 @@ import numpy as np
 from psm_control.errors import ConfigurationError, UnknownVariantError
 from psm_control.spec import PsmSpec, psm_spec
 
-__all__ = ["FORCE_PRESETS", "ForcePreset", "SafetyConfig", "load_safety_config"]
+__all__ = [
+    "DEADMAN_MIN_PERIODS",
+    "FORCE_PRESETS",
+    "MAX_CONTROL_RATE_HZ",
+    "MIN_CONTROL_RATE_HZ",
+    "ForcePreset",
+    "SafetyConfig",
+    "load_safety_config",
+]
 
 
 @dataclass(frozen=True)
@@ -50,6 +58,13 @@ FORCE_PRESETS: dict[str, ForcePreset] = {
 
 _DVRK_MIN_INSERTION_M = 0.045
 
+#: Allowed control rates [Hz]: 20 Hz for coarse simulation ticks up to 5 kHz for a hardware-side loop.
+MIN_CONTROL_RATE_HZ = 20.0
+MAX_CONTROL_RATE_HZ = 5000.0
+#: The deadman timeout must span at least this many control periods (one for the measurement's age
+#: when it is used, one for a single late or dropped message).
+DEADMAN_MIN_PERIODS = 2
+
 
 def _positive(name: str, value: float, upper: float = math.inf) -> None:
     if not (isinstance(value, int | float) and math.isfinite(value) and 0.0 < value <= upper):
@@ -71,7 +86,10 @@ class SafetyConfig:
     Attributes:
         arm: PSM generation (``"classic"`` or ``"si"``); joint limits come from its specification.
         tool: Instrument part number (None: the arm's large needle driver).
-        control_rate_hz: Rate of :meth:`ControlChain.tick` [Hz], 100 to 5000.
+        control_rate_hz: Rate of :meth:`ControlChain.tick` [Hz], 20 to 5000. The default 100 Hz is the
+            dVRK's CRTK publishing rate (measured_js and friends every 10 ms), at which a ROS 2 client
+            servos; the simulation ticks at 20-100 Hz between physics substeps for speed; a
+            hardware-side loop may run up to the dVRK's own 1.5 kHz and beyond.
         horizon_s: Look-ahead over which one tick's goal step may move each joint at its velocity limit [s].
         velocity_limit: Per-joint speed limits (6,) [rad/s, m/s]; None: the dVRK's move_jp limits.
         acceleration_limit: Per-joint acceleration limits (6,); default: the servo limits below; None: the
@@ -90,7 +108,9 @@ class SafetyConfig:
         stiffness_min_n_per_m: Lowest stiffness the force limit will ever assume [N/m].
         stiffness_max_n_per_m: Highest stiffness estimate accepted [N/m].
         stiffness_forgetting: RLS forgetting factor in (0.5, 1].
-        deadman_timeout_s: Measurements older than this stop the chain [s].
+        deadman_timeout_s: Measurements older than this stop the chain [s]; at least
+            :data:`DEADMAN_MIN_PERIODS` control periods, since a fresh measurement is already one period
+            old when the tick that uses it runs.
         max_translation_m: Largest accepted translation in one policy target [m]; larger is refused.
         max_yaw_rad: Largest accepted yaw in one policy target [rad].
         solver_eps: OSQP absolute and relative tolerance.
@@ -101,7 +121,7 @@ class SafetyConfig:
 
     arm: str = "classic"
     tool: str | None = None
-    control_rate_hz: float = 1000.0
+    control_rate_hz: float = 100.0
     horizon_s: float = 0.05
     velocity_limit: tuple[float, ...] | None = None
     # Servo acceleration limits [rad/s^2, m/s^2]. The dVRK limits only move_jp's trajectory (yaw/pitch
@@ -190,8 +210,15 @@ class SafetyConfig:
     def validate(self) -> None:
         """Raise :class:`ConfigurationError` naming the first field outside its allowed range."""
         dof = self._spec.dof
-        if not (isinstance(self.control_rate_hz, int | float) and 100.0 <= self.control_rate_hz <= 5000.0):
-            raise ConfigurationError("control_rate_hz", self.control_rate_hz, "a number in [100, 5000]")
+        if not (
+            isinstance(self.control_rate_hz, int | float)
+            and MIN_CONTROL_RATE_HZ <= self.control_rate_hz <= MAX_CONTROL_RATE_HZ
+        ):
+            raise ConfigurationError(
+                "control_rate_hz",
+                self.control_rate_hz,
+                f"a number in [{MIN_CONTROL_RATE_HZ:g}, {MAX_CONTROL_RATE_HZ:g}]",
+            )
         _positive("horizon_s", self.horizon_s, 1.0)
         if self.horizon_s < self.control_period_s:
             raise ConfigurationError(
@@ -235,6 +262,13 @@ class SafetyConfig:
         if not (isinstance(self.stiffness_forgetting, int | float) and 0.5 < self.stiffness_forgetting <= 1.0):
             raise ConfigurationError("stiffness_forgetting", self.stiffness_forgetting, "a number in (0.5, 1]")
         _positive("deadman_timeout_s", self.deadman_timeout_s, 1.0)
+        if self.deadman_timeout_s < DEADMAN_MIN_PERIODS * self.control_period_s * (1.0 - 1e-9):
+            raise ConfigurationError(
+                "deadman_timeout_s",
+                self.deadman_timeout_s,
+                f"at least {DEADMAN_MIN_PERIODS} control periods ({DEADMAN_MIN_PERIODS * self.control_period_s:g} s at "
+                f"control_rate_hz={self.control_rate_hz:g}): a fresh measurement is one period old when used",
+            )
         _positive("max_translation_m", self.max_translation_m, 0.2)
         _positive("max_yaw_rad", self.max_yaw_rad, math.pi)
         _positive("solver_eps", self.solver_eps, 1e-3)

@@ -21,6 +21,7 @@ re-checked: a violation above the tolerance raises, never passes.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
@@ -141,7 +142,7 @@ class SafetyFilter:
             "eps_abs": eps,
             "eps_rel": eps,
             "max_iter": max_iter,
-            "polishing": True,
+            "polishing": False,
             "verbose": False,
             "warm_starting": True,
             "scaling": 0,
@@ -241,7 +242,7 @@ class SafetyFilter:
         solved = False
         self._iterations = 0
         if self.naive or (self.m_rows and np.count_nonzero(self._G @ z > self._h)):
-            x, status = self._solve_naive(dq_nominal) if self.naive else self._solve_kept(z_nominal)
+            x, status = self._solve(z_nominal)
             if x is None or status not in _SOLVED or np.count_nonzero(np.isfinite(x)) != x.size:
                 raise InfeasibleProblemError("safety_filter", status, self._problem(dq_nominal))
             z = np.minimum(np.maximum(x[: self.dof], self._lb), self._ub)
@@ -288,38 +289,76 @@ class SafetyFilter:
 
     # -- solvers ------------------------------------------------------------------------------------
 
-    def _solve_kept(self, z_nominal: np.ndarray) -> tuple[np.ndarray | None, str]:
-        dof, first = self.dof, self._first_row
+    def _solve(self, z_nominal: np.ndarray) -> tuple[np.ndarray | None, str]:
+        """Solve this tick's QP: without slack first, with it only when that does not settle it."""
         rows = self._G / self._row_norm[:, None]
         h = self._h / self._row_norm
         # A row no displacement within the bounds can violate is left out (u = inf): same solution,
         # fewer active candidates for the solver.
         reach = np.abs(rows) @ np.maximum(np.abs(self._lb), np.abs(self._ub))
-        live = reach > h
-        u_rows = np.where(live, np.minimum(h, _INFINITY), _INFINITY)
-        # First without slack: if the rows can all be met and no multiplier exceeds its penalty, this is
-        # exactly the penalised problem's solution (slack zero), and ADMM converges fast on it.
-        self._hard_l[:dof] = np.maximum(self._lb, -_INFINITY)
-        self._hard_u[:dof] = np.minimum(self._ub, _INFINITY)
-        self._hard_u[dof:] = u_rows
-        self._hard_Ax[self._hard_G_pos] = rows.ravel()
-        self._q[:dof] = -z_nominal
-        x, y, status, iterations = self._hard.solve(self._q[:dof], self._hard_l, self._hard_u, Ax=self._hard_Ax)
+        u_rows = np.where(reach > h, np.minimum(h, _INFINITY), _INFINITY)
+        lb = np.maximum(self._lb, -_INFINITY)
+        ub = np.minimum(self._ub, _INFINITY)
+        self._q[: self.dof] = -z_nominal
+        # If the rows can all be met and no soft row's multiplier exceeds its penalty, the slack-free
+        # solution is exactly the penalised problem's (slack zero), and ADMM converges fast on it.
+        x, y_rows, status, iterations = self._stage(False, lb, ub, rows, u_rows)
         self._iterations = iterations
-        if status in _SOLVED and x is not None and not np.count_nonzero(y[dof:] > self._row_penalty):
+        if status in _SOLVED and x is not None and not np.count_nonzero(y_rows > self._row_penalty):
             return np.concatenate([x, np.zeros(self.n_slack)]), status
-        self._l[:dof] = self._hard_l[:dof]
-        self._u[:dof] = self._hard_u[:dof]
-        self._u[first:] = u_rows
-        self._Ax[self._G_pos] = rows.ravel()
-        x, _, status, iterations = self._slack.solve(self._q, self._l, self._u, Ax=self._Ax)
+        x, _, status, iterations = self._stage(True, lb, ub, rows, u_rows)
         self._iterations += iterations
         return x, status
 
-    def _solve_naive(self, dq_nominal: np.ndarray) -> tuple[np.ndarray | None, str]:
-        problem = self._problem(dq_nominal)
+    def _stage(
+        self, slack: bool, lb: np.ndarray, ub: np.ndarray, rows: np.ndarray, u_rows: np.ndarray
+    ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
+        """One QP: ``(x, row multipliers, status, iterations)``, kept workspace or rebuilt (naive)."""
+        dof = self.dof
+        if self.naive:
+            return self._stage_naive(slack, lb, ub, rows, u_rows)
+        if not slack:
+            self._hard_l[:dof] = lb
+            self._hard_u[:dof] = ub
+            self._hard_u[dof:] = u_rows
+            self._hard_Ax[self._hard_G_pos] = rows.ravel()
+            x, y, status, iterations = self._hard.solve(self._q[:dof], self._hard_l, self._hard_u, Ax=self._hard_Ax)
+            return x, y[dof:], status, iterations
+        first = self._first_row
+        self._l[:dof] = lb
+        self._u[:dof] = ub
+        self._u[first:] = u_rows
+        self._Ax[self._G_pos] = rows.ravel()
+        x, y, status, iterations = self._slack.solve(self._q, self._l, self._u, Ax=self._Ax)
+        return x, y[first:], status, iterations
+
+    def _stage_naive(
+        self, slack: bool, lb: np.ndarray, ub: np.ndarray, rows: np.ndarray, u_rows: np.ndarray
+    ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
+        """The same QP rebuilt and solved from scratch through qpsolvers (``solve_qp`` returns only ``x``;
+        ``solve_problem``, which it wraps, also gives the multipliers and the solver's status)."""
+        live = u_rows < _INFINITY
+        n = self.n if slack else self.dof
+        G = np.zeros((self.m_rows, n))
+        G[:, : self.dof] = rows
+        if slack:
+            soft = np.flatnonzero(self._row_slack >= 0)
+            G[soft, self.dof + self._row_slack[soft]] = -1.0
+            P = np.diag(self._P_diag)
+            q = self._q
+            lb = np.concatenate([lb, np.zeros(self.n_slack)])
+            ub = np.concatenate([ub, np.full(self.n_slack, np.inf)])
+        else:
+            P, q = np.eye(self.dof), self._q[: self.dof]
         settings = {k: v for k, v in self._settings.items() if k != "warm_starting"}
-        x = qpsolvers.solve_qp(
-            problem.P, problem.q, problem.G, problem.h, lb=problem.lb, ub=problem.ub, solver="osqp", **settings
+        problem = qpsolvers.Problem(
+            P, q, G[live] if live.any() else None, u_rows[live] if live.any() else None, lb=lb, ub=ub
         )
-        return x, "solved" if x is not None else "failed"
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            solution = qpsolvers.solve_problem(problem, solver="osqp", **settings)
+        info = solution.extras["info"]
+        y_rows = np.zeros(self.m_rows)
+        if live.any() and solution.z is not None:
+            y_rows[live] = solution.z
+        return solution.x, y_rows, str(info.status), int(info.iter)
