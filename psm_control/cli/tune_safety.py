@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -123,6 +124,11 @@ def run(args: argparse.Namespace) -> int:
         show_progress=not args.no_progress,
         worker_kwargs={"policy": args.policy, "task": task_id, "base_config": base},
     )
+    failed = [r for r in records if "error" in r]
+    if failed:
+        print(f"tune-safety: {len(failed)} of {len(records)} episodes failed; first error: {failed[0]['error']}",
+              file=sys.stderr)
+        return 1
     results = setting_results(records, args.episodes)
     front = pareto_front(results)
     chosen = recommend(results, bound)
