@@ -100,6 +100,11 @@ class SimulatedPsm(Node):
         self._publish_operating_state()
         self.create_timer(self.period_s, self._tick)
 
+    def set_base_frame(self, transform_rcm_to_base: np.ndarray) -> None:
+        """Move the RCM in ``<arm>_base`` (as the dVRK's ``set_base_frame``; a task reset moves it)."""
+        self.configuration.set_base_frame(transform_rcm_to_base)
+        self._ik_configuration.set_base_frame(transform_rcm_to_base)
+
     # -- state machine ----------------------------------------------------------------------------
     def _on_state_command(self, message: StringStamped) -> None:
         command = message.string

@@ -4,6 +4,11 @@ Users rehearse against it exactly as against a real console: the same topic name
 frames, the operating-state machine (enable, home) and the refusal of Cartesian goals below 45 mm of
 insertion. Discovery stays on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, UDPv4) on the
 domain given by ``--domain-id`` (default: ``$ROS_DOMAIN_ID``, else 0); clients must use the same domain.
+With ``--task ID`` the arm moves in that task's PyBullet tissue scene: the tissue force is on
+``body/measured_cf``, the grasp works, ``<arm>_base`` is the scene's world frame (the RCM's pose in it
+comes from the scene, not ``--base-xyz``), homing goes to the task's start joints, and the
+simulation-only topics ``/<arm>/task/{site,goal,achieved_goal,grasped}`` carry what a perception node
+would supply on a real robot (``/<arm>/task/reset`` with a seed starts a new episode).
 Needs the ``ros`` extra. Ctrl-C stops it.
 """
 
@@ -31,6 +36,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument(
         "--task", default=None, metavar="ID", help="serve a task's tissue scene (force on body/measured_cf)"
     )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the task scene's first episode (default: 0)")
     parser.add_argument("--rate", type=float, default=100.0, help="publishing rate [Hz] (default: 100, the dVRK's)")
     parser.add_argument(
         "--domain-id", type=int, default=_domain_default(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
@@ -61,13 +67,19 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.executors import ExternalShutdownException
 
     from hardware_if.sim_dvrk import SimulatedPsm
-    from hardware_if.sim_task import task_arm_model
+    from hardware_if.sim_task import TaskArm, TaskTopics
 
-    arm_model = task_arm_model(args.task) if args.task is not None else None
+    task = TaskArm(args.task, seed=args.seed) if args.task is not None else None
     base_frame = np.eye(4)
     base_frame[:3, 3] = args.base_xyz
+    home_q = None
+    if task is not None:
+        base_frame, home_q = task.base_frame, task.home_q
     with ros_session():
-        node = SimulatedPsm(args.arm, rate_hz=args.rate, arm_model=arm_model, base_frame=base_frame)
+        node = SimulatedPsm(args.arm, rate_hz=args.rate, arm_model=task, base_frame=base_frame, home_q=home_q)
+        if task is not None:
+            TaskTopics(node, task)
+            node.get_logger().info(f"task {args.task!r} scene (seed {args.seed}); task topics under /{args.arm}/task/")
         node.get_logger().info(
             f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
         )
@@ -77,4 +89,6 @@ def run(args: argparse.Namespace) -> int:
             pass
         finally:
             node.destroy_node()
+            if task is not None:
+                task.close()
     return 0
