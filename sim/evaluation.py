@@ -41,7 +41,7 @@ class EpisodeResult:
     sim_unstable: bool
     final_exposure: float
     joint_limit_violations: int
-    workspace_violation_mm: float | None
+    workspace_violation_mm: float
     min_insertion_margin_m: float
     safety_stops: int
     interventions: int
@@ -53,6 +53,9 @@ class EpisodeResult:
 
 def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
     """A policy and its per-episode reset from ``scripted``, ``random``, ``module:callable`` or a checkpoint.
+
+    ``module:callable`` names a function of the observation dict, or a class built with the environment
+    (``cls(env)``, as :class:`sim.pulling.AggressivePull`); a ``reset()`` method is called per episode.
 
     Raises:
         ConfigurationError: The policy cannot be found or checkpoints are not supported yet.
@@ -70,6 +73,8 @@ def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
             target = getattr(importlib.import_module(module_name), attribute)
         except (ImportError, AttributeError) as e:
             raise ConfigurationError("policy", spec, "an importable module:callable") from e
+        if isinstance(target, type):  # a policy class is built with the environment, as ScriptedExpert(env)
+            target = target(env)
         reset = getattr(target, "reset", None)
         return target, (reset if callable(reset) else (lambda: None))
     try:
@@ -97,6 +102,7 @@ def run_episode(
     counts = dict.fromkeys(_SEVERITY, 0)
     peak, steps, violations, stops, interventions = 0.0, 0, 0, 0, 0
     margin = float(info["insertion_m"]) - minimum_insertion
+    outside_m = float(info["workspace_violation_m"])
     while True:
         observation, _, terminated, truncated, info = env.step(policy(observation))
         steps += 1
@@ -106,6 +112,7 @@ def run_episode(
         q = np.asarray(info["q"])
         violations += int(np.any(q < model.lower - 1e-9) or np.any(q > model.upper + 1e-9))
         margin = min(margin, float(info["insertion_m"]) - minimum_insertion)
+        outside_m = max(outside_m, float(info["workspace_violation_m"]))
         stops += int(info["safety_stops"])
         interventions += len(info["interventions"])
         if terminated or truncated:
@@ -124,7 +131,7 @@ def run_episode(
         sim_unstable=counts["sim_unstable"] > 0,
         final_exposure=float(info["exposure"]),
         joint_limit_violations=violations,
-        workspace_violation_mm=None,
+        workspace_violation_mm=1000.0 * outside_m,
         min_insertion_margin_m=margin,
         safety_stops=stops,
         interventions=interventions,
@@ -150,7 +157,7 @@ def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, A
         "env_steps_per_s": float(steps / elapsed_s) if elapsed_s > 0 else 0.0,
         "failure_classes": {c: sum(r.failure_class == c for r in results) for c in FAILURE_CLASSES},
         "joint_limit_violations": int(sum(r.joint_limit_violations for r in results)),
-        "workspace_violation_mm": None,
+        "workspace_violation_mm": float(max(r.workspace_violation_mm for r in results)),
         "min_insertion_margin_m": float(min(r.min_insertion_margin_m for r in results)),
         "safety_stops": int(sum(r.safety_stops for r in results)),
         "interventions": int(sum(r.interventions for r in results)),

@@ -18,6 +18,8 @@ __all__ = ["ScriptedExpert"]
 _HOVER_M = 0.008
 _NEAR_M = 0.0015
 _RETRACT_OFFSET_M = np.array([0.0, -0.02, 0.035])  # up and back towards the pinned edge (Expose task)
+# Fraction of a step's goal the control chain covers within the step, from rest or in steady motion.
+_TRACKED_FRACTION = 0.5
 
 
 class ScriptedExpert:
@@ -79,9 +81,17 @@ class ScriptedExpert:
         return np.asarray(env.goal, dtype=float)
 
     def _move(self, delta_m: np.ndarray, jaw: float) -> np.ndarray:
+        """The action whose goal, once the latency has passed, lands ``delta_m`` from here.
+
+        Each applied action replaces the control chain's goal with *the tool's pose then* plus the action's
+        step, so an action must be aimed from where the tool will be when it is applied, not from where it is
+        now. Every pending action is taken to carry the tool :data:`_TRACKED_FRACTION` of its step before the
+        next one replaces it. Assuming the full step instead turns the loop into a dead-beat controller
+        that, with the chain's acceleration-limited motion, alternates +-5 mm commands forever (measured).
+        """
         step = self.env.config.max_step_m
-        in_flight = sum((pending[:3] * step for pending in self.env._pending), np.zeros(3))  # action latency
+        in_flight = sum((pending[:3] * step for pending in self.env._pending), np.zeros(3))
         action = np.zeros(5, dtype=np.float32)
-        action[:3] = np.clip((delta_m - in_flight) / step, -1.0, 1.0)
+        action[:3] = np.clip((delta_m - _TRACKED_FRACTION * in_flight) / step, -1.0, 1.0)
         action[4] = jaw
         return action

@@ -59,6 +59,13 @@ class PhysicsParams:
             raise ConfigurationError("time_step_s", self.time_step_s, "a substep in (0, 0.01] s")
         if self.substeps < 1 or self.solver_iterations < 1:
             raise ConfigurationError("substeps", self.substeps, "at least one substep and one solver iteration")
+        ticks = self.control_period_s / self.time_step_s
+        if not (ticks >= 1 and abs(ticks - round(ticks)) < 1e-6 and self.substeps % round(ticks) == 0):
+            raise ConfigurationError(
+                "control_period_s",
+                self.control_period_s,
+                f"a whole number of substeps ({self.time_step_s:g} s) that divides the {self.substeps} substeps",
+            )
 
     @property
     def step_s(self) -> float:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import warnings
 from typing import Any
 
 import numpy as np
@@ -21,9 +20,7 @@ def run_episodes(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise ConfigurationError("--episodes", args.episodes, "a positive number of episodes")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        env = make(args.task)
+    env = make(args.task)
     expert = ScriptedExpert(env)
     kept: list[dict[str, Any]] = []
     frames: list[Any] = []

@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-import warnings
 
 __all__ = ["add_arguments", "run"]
 
@@ -43,9 +42,7 @@ def run(args: argparse.Namespace) -> int:
 
     from sim.envs import make
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        env = make(args.task)
+    env = make(args.task)
     try:
         physics = env.unwrapped.config.physics
         state_rate, state_cpu_rate, unstable = _rate(env, args.steps, render=False)

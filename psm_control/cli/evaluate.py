@@ -2,14 +2,15 @@
 
 POLICY is ``scripted`` (the rule-based expert), ``random``, ``module:callable`` (a callable taking the
 observation dict and returning an action) or a checkpoint path (loaded by ``policies.checkpoint``).
-Episode seeds are ``S * 100000 + i`` for each ``--seeds`` S and episode i.
+Episode seeds are ``S * 100000 + i`` for each ``--seeds`` S and episode i. Every action goes through
+the control chain; ``--safety-config FILE`` (TOML/YAML, as ``tissue-retract safety show``) sets its
+limits, for example ``force_limit_n``; ``--no-safety`` is the ablation without the filter.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import warnings
 
 __all__ = ["add_parser", "run"]
 
@@ -22,6 +23,9 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument("--episodes", type=int, default=50, help="episodes per seed (default: 50)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="seeds (default: 1 2 3)")
     parser.add_argument("--no-safety", action="store_true", help="ablation: run without the safety filter")
+    parser.add_argument(
+        "--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml), e.g. force_limit_n"
+    )
     parser.add_argument("--json", metavar="FILE", default=None, help="write {summary, episodes} as JSON")
     parser.set_defaults(func=run)
 
@@ -38,28 +42,44 @@ def run(args: argparse.Namespace) -> int:
         from psm_control.errors import ConfigurationError
 
         raise ConfigurationError("--episodes", args.episodes, "a positive number of episodes")
+    safety_config = None
+    if args.safety_config is not None:
+        from safety.config import load_safety_config
+
+        safety_config = load_safety_config(args.safety_config)
     console = Console(width=110)
     if args.no_safety:
         console.print("[bold red]ABLATION: safety filter OFF[/] - commands reach the joints unfiltered")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        env = sim.envs.make(args.task, safety=not args.no_safety)
+    env = sim.envs.make(args.task, safety=not args.no_safety, safety_config=safety_config)
     try:
         policy, reset = resolve_policy(args.policy, env)
         seeds = [s * 100000 + i for s in args.seeds for i in range(args.episodes)]
         results, elapsed = timed(lambda: [run_episode(env, policy, reset, seed) for seed in seeds])
         controller = env.unwrapped.controller_name
+        force_limit_n = env.unwrapped.controller.config.effective_force_limit_n
     finally:
         env.close()
     summary = summarize(results, elapsed)
-    summary.update(task=sim.envs.gym_id(args.task), policy=args.policy, seeds=args.seeds, controller=controller)
+    summary.update(
+        task=sim.envs.gym_id(args.task),
+        policy=args.policy,
+        seeds=args.seeds,
+        controller=controller,
+        safety=not args.no_safety,
+        force_limit_n=force_limit_n,
+    )
     table = Table(title=f"{args.policy} on {summary['task']} ({summary['episodes']} episodes, {controller})")
     table.add_column("metric")
     table.add_column("value", justify="right")
     table.add_row("success rate", f"{summary['success_rate']:.3f} +- {summary['ci95']:.3f}")
-    table.add_row("peak force [N]", f"{summary['peak_force_n']:.3f}")
-    for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops"):
+    limit = f" (limit {force_limit_n:g} N{'' if summary['safety'] else ', NOT enforced'})"
+    table.add_row("peak force [N]", f"{summary['peak_force_n']:.3f}{limit}")
+    table.add_row("mean peak force [N]", f"{summary['mean_peak_force_n']:.3f}")
+    for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops", "interventions"):
         table.add_row(key, str(summary[key]))
+    table.add_row("joint limit violations", str(summary["joint_limit_violations"]))
+    table.add_row("workspace violation [mm]", f"{summary['workspace_violation_mm']:.2f}")
+    table.add_row("min insertion margin [mm]", f"{1000 * summary['min_insertion_margin_m']:.1f}")
     for name, count in summary["failure_classes"].items():
         table.add_row(f"failure: {name}", str(count))
     table.add_row("env steps/s", f"{summary['env_steps_per_s']:.0f}")

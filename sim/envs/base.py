@@ -20,6 +20,8 @@ import pybullet as p
 from psm_control.commands import CartesianDelta, MeasuredState
 from psm_control.errors import UnknownVariantError
 from psm_control.robot import PsmModel
+from safety.chain import ControlChain
+from safety.config import SafetyConfig
 from sim.backend import SimBackend
 from sim.control import make_controller
 from sim.exposure import exposed_fraction, surface_samples
@@ -54,7 +56,8 @@ class EnvConfig:
         damage: Tissue damage thresholds.
         randomization: Overrides of the randomization ranges.
         camera: The endoscope camera.
-        controller: ``"interim"`` (DLS IK, no safety filter) or ``"chain"`` (the project's control chain).
+        safety_config: The control chain's limits (force limit, workspace box, motion limits); None: the
+            :class:`~safety.config.SafetyConfig` defaults. Its control rate is replaced by the physics'.
     """
 
     max_step_m: float = 0.005
@@ -69,7 +72,7 @@ class EnvConfig:
     damage: DamageLimits = field(default_factory=DamageLimits)
     randomization: dict[str, tuple[float, float]] = field(default_factory=dict)
     camera: Camera = field(default_factory=Camera)
-    controller: str = "interim"
+    safety_config: SafetyConfig | None = None
 
 
 class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -105,6 +108,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.values: dict[str, float] = {}
         self.site = "centre"
         self.goal = np.zeros(self.goal_size)
+        self.controller: ControlChain | None = None
         self.controller_name = ""
 
     # ----------------------------------------------------------------- task hooks
@@ -140,12 +144,14 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         )
         self.scene.settle()
         self.backend = SimBackend(self.scene.body, self.scene.configuration.q, cfg.jaw_open_rad)
-        self.controller, self.controller_name = make_controller(
-            self.scene.configuration,
-            safety=cfg.safety,
-            control_period_s=cfg.physics.control_period_s,
-            kind=cfg.controller,
-        )
+        if self.controller is None:  # built once: the chain's QP workspaces outlive episodes
+            self.controller, self.controller_name = make_controller(
+                self.scene.configuration,
+                safety=cfg.safety,
+                control_period_s=cfg.physics.control_period_s,
+                config=cfg.safety_config,
+            )
+        self.controller.log.clear()
         self.controller.reset(self.backend.measure())
         self._nodes = self.scene.tissue.positions()
         self._exposure_points = surface_samples(self.scene.hidden_centre, HIDDEN_HALF_EXTENTS_M)
@@ -165,7 +171,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Apply one action for one control step (``physics.substeps`` substeps)."""
-        if self.scene is None:
+        if self.scene is None or self.controller is None:
             raise RuntimeError("call reset() before step()")
         events: dict[str, Any] = {}
         safe_action = self._checked_action(action, events)
@@ -315,6 +321,18 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "desired_goal": np.asarray(self.goal, dtype=np.float32),
         }
 
+    def _workspace_violation_m(self) -> float:
+        """How far the tool tip is outside the control chain's workspace box (0 inside) [m].
+
+        The box is about the RCM (the chain's base frame), where the configuration's local pose is.
+        """
+        assert self.scene is not None and self.controller is not None
+        config = self.controller.config
+        self.scene.configuration.update(self.backend.q, self.backend.jaw)
+        tip = self.scene.configuration.local_pose()[:3, 3]
+        outside = np.maximum(np.asarray(config.workspace_min_m) - tip, tip - np.asarray(config.workspace_max_m))
+        return float(np.linalg.norm(np.maximum(outside, 0.0)))
+
     def _info(self, events: dict[str, Any]) -> dict[str, Any]:
         assert self.scene is not None
         achieved = np.asarray(self._achieved_goal())
@@ -330,6 +348,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "controller": self.controller_name,
             "q": self.backend.q.copy(),
             "insertion_m": float(self.backend.q[2]),
+            "workspace_violation_m": self._workspace_violation_m(),
         }
         for flag in (
             "grip_loss", "improper_grasp", "tissue_damage", "sim_unstable", "invalid_action", "action_clipped",

@@ -141,15 +141,48 @@ def test_async_vector_env_steps() -> None:
 
 
 def test_env_runs_through_the_control_chain() -> None:
-    """With controller='chain' the arm moves through safety.chain.ControlChain and info reports it."""
-    env = make_env("lift", controller="chain")
+    """By default the arm moves only through safety.chain.ControlChain, with its filter on, and info says so."""
+    from safety.chain import ControlChain
+
+    env = make_env("lift")
     try:
         env.reset(seed=0)
+        assert isinstance(env.unwrapped.controller, ControlChain) and env.unwrapped.controller.safety
         start = env.unwrapped.grasp_position()
         for _ in range(3):
             _, _, _, _, info = env.step(np.array([0.0, 0.0, -1.0, 0.0, 1.0], dtype=np.float32))
-        assert info["controller"].startswith("ControlChain")
+        assert info["controller"].startswith("ControlChain (safety filter on")
         assert env.unwrapped.grasp_position()[2] < start[2] - 1e-4
         assert isinstance(info["interventions"], tuple) and isinstance(info["safety_stop"], bool)
+        assert isinstance(info["safety_stops"], int) and info["workspace_violation_m"] == 0.0
+    finally:
+        env.close()
+
+
+def test_safety_off_is_a_loud_ablation(capfd: pytest.CaptureFixture[str]) -> None:
+    """safety=False still drives the chain, but says ABLATION on stderr and in info."""
+    env = make_env("lift", safety=False)
+    try:
+        env.reset(seed=0)
+        _, _, _, _, info = env.step(np.zeros(5, dtype=np.float32))
+    finally:
+        env.close()
+    assert "ABLATION" in capfd.readouterr().err
+    assert "ABLATION" in info["controller"] and not env.unwrapped.controller.safety
+
+
+def test_a_commanded_step_is_tracked() -> None:
+    """Repeated full 5 mm steps move the tip at least 3 mm per 50 ms step in steady motion (move_jp: 1.6)."""
+    env = make_env("lift")
+    try:
+        env.reset(seed=5, options={"action_latency_steps": 0})
+        configuration = env.unwrapped.scene.configuration
+        tips = []
+        for _ in range(8):
+            env.step(np.array([1.0, 0.0, 0.0, 0.0, 1.0], dtype=np.float32))
+            configuration.update(env.unwrapped.backend.q)
+            tips.append(configuration.measured_pose()[:3, 3].copy())
+        per_step = np.diff(np.array(tips)[:, 0])[-4:]
+        assert np.all(per_step > 0.003) and np.all(per_step <= 0.005 + 1e-6)
     finally:
         env.close()
