@@ -26,7 +26,7 @@ from std_msgs.msg import String  # type: ignore[import-untyped]
 from hardware_if import convert
 from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
-from hardware_if.errors import DvrkTimeoutError
+from hardware_if.errors import DvrkError, DvrkTimeoutError
 from psm_control.commands import JointCommand, MeasuredState
 
 __all__ = ["PsmClient"]
@@ -51,6 +51,8 @@ class PsmClient(Node):
         on_measured: Called (from the ROS thread) with each ``measured_js`` and its arrival time on
             ``time.perf_counter`` [s], e.g. to record or time the stream.
         node_name: ROS node name; default ``<arm>_client``.
+        listen_only: Create no command publishers at all (a dry run): the client only subscribes, and
+            every command method raises :class:`~hardware_if.errors.DvrkError`.
 
     Use as a context manager (or call :meth:`start` and :meth:`close`).
     """
@@ -63,6 +65,7 @@ class PsmClient(Node):
         on_fault: Callable[[DeadmanStatus], None] | None = None,
         on_measured: Callable[[JointState, float], None] | None = None,
         node_name: str | None = None,
+        listen_only: bool = False,
     ) -> None:
         self.topics = ArmTopics(arm)
         super().__init__(node_name or f"{arm.lower()}_client")
@@ -99,12 +102,17 @@ class PsmClient(Node):
             self.create_subscription(PoseStamped, t(name), self._pose_callback(name), state)
         self.create_subscription(OperatingState, t("operating_state"), self._on_operating_state, event)
         self.create_subscription(String, t("error"), self._on_error, event)
-        self._servo_jp = self.create_publisher(JointState, t("servo_jp"), state)
-        self._servo_cp = self.create_publisher(PoseStamped, t("servo_cp"), state)
-        self._move_jp = self.create_publisher(JointState, t("move_jp"), state)
-        self._move_cp = self.create_publisher(PoseStamped, t("move_cp"), state)
-        self._jaw_servo_jp = self.create_publisher(JointState, t("jaw/servo_jp"), state)
-        self._state_command = self.create_publisher(StringStamped, t("state_command"), event)
+        self.listen_only = listen_only
+        publishers: dict[str, Publisher | None] = dict.fromkeys(
+            ("servo_jp", "servo_cp", "move_jp", "move_cp", "jaw/servo_jp", "state_command")
+        )
+        if not listen_only:
+            for name in ("servo_jp", "move_jp", "jaw/servo_jp"):
+                publishers[name] = self.create_publisher(JointState, t(name), state)
+            for name in ("servo_cp", "move_cp"):
+                publishers[name] = self.create_publisher(PoseStamped, t(name), state)
+            publishers["state_command"] = self.create_publisher(StringStamped, t("state_command"), event)
+        self._commands = publishers
         self.create_timer(WATCHDOG_PERIOD_S, self._watch)
 
     # -- lifetime ---------------------------------------------------------------------------------
@@ -244,7 +252,9 @@ class PsmClient(Node):
 
     def _send_hold(self) -> None:
         if self._hold_q is not None:
-            self._servo_jp.publish(convert.joint_state(JOINT_NAMES, self._hold_q, stamp_s=self._now_s()))
+            self._command_publisher("servo_jp").publish(
+                convert.joint_state(JOINT_NAMES, self._hold_q, stamp_s=self._now_s())
+            )
 
     @property
     def status(self) -> DeadmanStatus:
@@ -291,6 +301,7 @@ class PsmClient(Node):
 
     def servo_jp(self, command: JointCommand) -> None:
         """Forward a joint set-point (and the jaw) if the deadman allows; otherwise re-send the hold."""
+        self._command_publisher("servo_jp")  # a listen-only client refuses before touching the deadman
         with self._lock:
             self._commanding = True
             status = self._apply_deadman()
@@ -298,19 +309,22 @@ class PsmClient(Node):
                 self._send_hold()
                 return
             stamp = self._now_s()
-            self._servo_jp.publish(convert.joint_state(JOINT_NAMES, command.q, stamp_s=stamp))
-            self._jaw_servo_jp.publish(convert.joint_state((JAW_JOINT_NAME,), [command.jaw], stamp_s=stamp))
+            self._command_publisher("servo_jp").publish(convert.joint_state(JOINT_NAMES, command.q, stamp_s=stamp))
+            self._command_publisher("jaw/servo_jp").publish(
+                convert.joint_state((JAW_JOINT_NAME,), [command.jaw], stamp_s=stamp)
+            )
 
     # -- other CRTK commands ----------------------------------------------------------------------
     def servo_cp(self, pose_base: np.ndarray) -> bool:
         """Send a tool pose goal (4x4, base frame); False (and nothing sent) when the deadman holds."""
-        return self._send_pose(self._servo_cp, pose_base)
+        return self._send_pose("servo_cp", pose_base)
 
     def move_cp(self, pose_base: np.ndarray) -> bool:
         """Send a tool pose goal reached by the arm's own trajectory; False when the deadman holds."""
-        return self._send_pose(self._move_cp, pose_base)
+        return self._send_pose("move_cp", pose_base)
 
-    def _send_pose(self, publisher: Publisher, pose_base: np.ndarray) -> bool:
+    def _send_pose(self, name: str, pose_base: np.ndarray) -> bool:
+        publisher = self._command_publisher(name)
         with self._lock:
             if self._commanding and self._apply_deadman().holding:
                 return False
@@ -320,11 +334,13 @@ class PsmClient(Node):
 
     def move_jp(self, q: np.ndarray) -> None:
         """Send a joint goal the arm reaches with its own trajectory (not guarded: the arm plans it)."""
-        self._move_jp.publish(convert.joint_state(JOINT_NAMES, q, stamp_s=self._now_s()))
+        self._command_publisher("move_jp").publish(convert.joint_state(JOINT_NAMES, q, stamp_s=self._now_s()))
 
     def jaw_servo_jp(self, jaw: float) -> None:
         """Send a jaw angle set-point [rad]."""
-        self._jaw_servo_jp.publish(convert.joint_state((JAW_JOINT_NAME,), [jaw], stamp_s=self._now_s()))
+        self._command_publisher("jaw/servo_jp").publish(
+            convert.joint_state((JAW_JOINT_NAME,), [jaw], stamp_s=self._now_s())
+        )
 
     def pose(self, name: str = "measured_cp") -> tuple[np.ndarray, str]:
         """The latest 4x4 pose and frame_id on ``measured_cp``, ``local/measured_cp`` or ``setpoint_cp``.
@@ -336,6 +352,12 @@ class PsmClient(Node):
             if name not in self._poses:
                 raise DvrkTimeoutError(f"a {name} from {self.topics.arm}", 0.0, self._state.state)
             return self._poses[name].copy(), self._frame_ids[name]
+
+    def _command_publisher(self, name: str) -> Publisher:
+        publisher = self._commands[name]
+        if publisher is None:
+            raise DvrkError(f"{self.topics.arm}: {name} refused, this client listens only (dry run)")
+        return publisher
 
     # -- blocking helpers -------------------------------------------------------------------------
     def operating_state(self) -> tuple[str, bool, bool]:
@@ -398,7 +420,7 @@ class PsmClient(Node):
     def _send_state_command(self, command: str) -> None:
         message = StringStamped(string=command)
         message.header.stamp = convert.seconds_to_time(self._now_s())
-        self._state_command.publish(message)
+        self._command_publisher("state_command").publish(message)
 
     def _now_s(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9

@@ -1,0 +1,200 @@
+"""A task seen over ROS 2: the policy's observation assembled from CRTK topics and the task topics.
+
+:class:`RemoteTask` has the parts of a task environment a policy reads (``observation_space``,
+``action_space``, ``config``, ``goal``, ``grasp_position()``, ``site_position()``, ``scene.grasp.holding``),
+so the simulation's scripted expert and trained checkpoints run unchanged against a dVRK. The arm's
+part comes from the arm's own topics (``measured_cp``, ``jaw/measured_js``, ``body/measured_cf`` via
+:class:`~hardware_if.psm_client.PsmClient`); the grasp site, the goal and the grasped flag come from
+``/<arm>/task/*`` (:data:`~hardware_if.sim_task.TASK_TOPICS`): the simulated dVRK publishes them, on a
+robot a perception node does.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from geometry_msgs.msg import PointStamped  # type: ignore[import-untyped]
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from std_msgs.msg import Bool, Int64  # type: ignore[import-untyped]
+
+from hardware_if.crtk import periodic_qos
+from hardware_if.errors import DvrkTimeoutError
+from hardware_if.psm_client import PsmClient
+from hardware_if.sim_task import task_topic
+
+__all__ = ["RemoteTask", "TaskListener"]
+
+
+class TaskListener(Node):
+    """Subscribes to ``/<arm>/task/*`` and spins on its own thread (use as a context manager).
+
+    Args:
+        arm: Arm name.
+        listen_only: Create no ``task/reset`` publisher (a dry run changes nothing).
+    """
+
+    def __init__(self, arm: str, *, listen_only: bool = False) -> None:
+        super().__init__(f"{arm.lower()}_task_listener_{time.monotonic_ns() % 100000}")
+        self.arm = arm
+        self._lock = threading.Condition()
+        self._points: dict[str, np.ndarray] = {}
+        self._stamps: dict[str, float] = {}
+        self._grasped = False
+        qos = periodic_qos()
+        for name in ("site", "goal", "achieved_goal"):
+            self.create_subscription(PointStamped, task_topic(arm, name), self._point_callback(name), qos)
+        self.create_subscription(Bool, task_topic(arm, "grasped"), self._on_grasped, qos)
+        self._reset = None if listen_only else self.create_publisher(Int64, task_topic(arm, "reset"), qos)
+        self._executor = SingleThreadedExecutor(context=self.context)
+        self._executor.add_node(self)
+        self._running = True
+        self._thread = threading.Thread(target=self._spin, name=f"{arm}-task", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while self._running and self.context.ok():
+            try:
+                self._executor.spin_once(timeout_sec=0.05)
+            except Exception:  # shutting down
+                if not self.context.ok():
+                    break
+
+    def _point_callback(self, name: str) -> Any:
+        def callback(message: PointStamped) -> None:
+            with self._lock:
+                self._points[name] = np.array([message.point.x, message.point.y, message.point.z])
+                self._stamps[name] = time.monotonic()
+                self._lock.notify_all()
+
+        return callback
+
+    def _on_grasped(self, message: Bool) -> None:
+        with self._lock:
+            self._grasped = bool(message.data)
+
+    def point(self, name: str) -> np.ndarray:
+        """The latest ``site``, ``goal`` or ``achieved_goal`` [m] in ``<arm>_base``."""
+        with self._lock:
+            if name not in self._points:
+                raise DvrkTimeoutError(f"{task_topic(self.arm, name)}", 0.0)
+            return self._points[name].copy()
+
+    @property
+    def grasped(self) -> bool:
+        """The latest ``task/grasped``."""
+        with self._lock:
+            return self._grasped
+
+    def wait(self, timeout_s: float, *, after_s: float = float("-inf")) -> bool:
+        """Block until site and goal arrived (both after ``after_s`` on ``time.monotonic``); False on timeout."""
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            while not all(self._stamps.get(n, float("-inf")) > after_s for n in ("site", "goal")):
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return False
+                self._lock.wait(min(remaining, 0.1))
+            return True
+
+    def request_reset(self, seed: int) -> bool:
+        """Ask the simulated dVRK for a new episode; False for a listen-only listener."""
+        if self._reset is None:
+            return False
+        self._reset.publish(Int64(data=int(seed)))
+        return True
+
+    def close(self) -> None:
+        """Stop spinning and destroy the node."""
+        self._running = False
+        self._thread.join(timeout=2.0)
+        self._executor.shutdown(timeout_sec=1.0)
+        self.destroy_node()
+
+    def __enter__(self) -> TaskListener:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class RemoteTask:
+    """The policy's view of a task over ROS 2 (see the module docstring).
+
+    Args:
+        task: Task id; its spaces and action scaling come from the task's simulation config.
+        client: The arm.
+        listener: The task topics.
+    """
+
+    def __init__(self, task: str, client: PsmClient, listener: TaskListener) -> None:
+        import sim.envs
+
+        env = sim.envs.make(task)
+        try:
+            self.observation_space = env.observation_space
+            self.action_space = env.action_space
+            self.config = env.unwrapped.config
+            self.model = env.unwrapped.model
+        finally:
+            env.close()
+        self.task = task
+        self.client, self.listener = client, listener
+        self.unwrapped = self
+        self._pending: collections.deque[np.ndarray] = collections.deque()
+        self._configuration = self.model.configuration()
+        self.scene = SimpleNamespace(grasp=self)
+
+    @property
+    def holding(self) -> bool:
+        """The jaw holds the tissue (``scene.grasp.holding``, from ``task/grasped``)."""
+        return self.listener.grasped
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The desired goal [m] in ``<arm>_base``."""
+        return self.listener.point("goal")
+
+    def base_frame(self) -> np.ndarray:
+        """Pose of the RCM in ``<arm>_base`` from ``measured_cp`` and ``local/measured_cp`` (4x4)."""
+        measured, _ = self.client.pose("measured_cp")
+        local, _ = self.client.pose("local/measured_cp")
+        return np.asarray(measured @ np.linalg.inv(local))
+
+    def grasp_position(self) -> np.ndarray:
+        """The point midway along the jaws [m] in ``<arm>_base``, by kinematics from the measured joints."""
+        measured = self.client.measure()
+        self._configuration.set_base_frame(self.base_frame())
+        self._configuration.update(measured.q, measured.jaw)
+        return np.asarray(self._configuration.grasp_position())
+
+    def site_position(self) -> np.ndarray:
+        """The grasp site [m] in ``<arm>_base``."""
+        return self.listener.point("site")
+
+    def success(self) -> tuple[bool, float]:
+        """Whether the achieved goal is within the task's success threshold, and its distance [m]."""
+        distance = float(np.linalg.norm(self.listener.point("achieved_goal") - self.goal))
+        return distance <= self.config.success_threshold_m, distance
+
+    def observation(self) -> dict[str, np.ndarray]:
+        """The task's observation dict, laid out as the simulation's (tip pose, jaw, site, force, grasped)."""
+        measured = self.client.measure()
+        pose, _ = self.client.pose("measured_cp")
+        tip = pose[:3, 3]
+        site = self.site_position()
+        quaternion = np.asarray(pin.Quaternion(pose[:3, :3]).coeffs())  # x, y, z, w
+        vector = np.concatenate(
+            [tip, quaternion, [measured.jaw], site, site - tip, measured.force_n, [float(self.holding)]]
+        )
+        return {
+            "observation": vector.astype(np.float32),
+            "achieved_goal": self.listener.point("achieved_goal").astype(np.float32),
+            "desired_goal": self.goal.astype(np.float32),
+        }

@@ -1,0 +1,111 @@
+"""``tissue-retract deploy``: run a policy through the safety chain, in the simulation or on a dVRK.
+
+POLICY is ``scripted``, ``random``, ``module:callable`` or a checkpoint path, as for ``evaluate``.
+``--target sim`` runs the task's PyBullet environment; ``--target dvrk`` drives the arm's CRTK topics
+over ROS 2 with the same chain (``tissue-retract sim-dvrk --task ID`` serves a simulated one). The
+observation is assembled from ``measured_cp``, ``jaw/measured_js``, ``body/measured_cf`` and the
+``/<arm>/task/*`` topics (site, goal, grasped: simulation-only, a perception node's job on a robot).
+An arm that is not ENABLED and homed is enabled and homed first (not in a dry run).
+
+``--dry-run`` (dVRK) listens to the live arm and computes, logs and records every command but creates
+no command publisher: nothing is published on servo_jp, servo_cp, move_jp, move_cp, jaw/servo_jp or
+jaw/move_jp. It ends with a report: commands it would have sent, safety interventions, predicted forces.
+
+The deadman holds the arm on stale or vanished measurements, a state other than ENABLED and homed, or a
+tracking error; deploy then stops, says why and exits with status 4. Ctrl-C stops cleanly (status 130).
+Every run is recorded to MCAP (``--record``, default ``runs/deploy-<time>.mcap``; see ``replay``).
+
+Discovery stays on localhost (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) for dry runs and unless
+``--network`` is given; ``--domain-id`` (default ``$ROS_DOMAIN_ID`` or 0) must match the robot's. To reach
+a real console on another machine pass ``--network`` and the console's domain id, and make sure
+``ROS_AUTOMATIC_DISCOVERY_RANGE``/``ROS_STATIC_PEERS`` in your environment reach it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["add_parser", "run"]
+
+
+def _domain_default() -> int:
+    try:
+        return int(os.environ.get("ROS_DOMAIN_ID", "0"))
+    except ValueError:
+        return 0
+
+
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the subcommand."""
+    parser = subparsers.add_parser(
+        "deploy", help="deploy a policy to the simulation or a dVRK over ROS 2", description=__doc__
+    )
+    parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
+    parser.add_argument("--target", required=True, choices=("sim", "dvrk"), help="simulation or a dVRK over ROS 2")
+    parser.add_argument("--task", default="lift", help="task id: lift, target, multisite, expose (default: lift)")
+    parser.add_argument("--arm", default="PSM1", help="arm name / topic namespace (default: PSM1)")
+    parser.add_argument(
+        "--rate", type=float, default=None, help="control rate [Hz] (default: 100 on the dVRK, the simulation's in sim)"
+    )
+    parser.add_argument("--dry-run", action="store_true", help="compute and record, publish nothing on motion topics")
+    parser.add_argument("--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml)")
+    parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
+    parser.add_argument("--episodes", type=int, default=1, help="episodes (default: 1)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
+    parser.add_argument("--wait", type=float, default=30.0, help="seconds to wait for the arm and task topics")
+    parser.add_argument(
+        "--domain-id", type=int, default=_domain_default(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
+    )
+    parser.add_argument(
+        "--network",
+        action="store_true",
+        help="dvrk only, not with --dry-run: keep your ROS discovery settings instead of localhost-only",
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Deploy, print the report, return 0, 4 (hold) or 130 (Ctrl-C)."""
+    from psm_control.errors import ConfigurationError
+
+    if args.network and args.dry_run:
+        raise ConfigurationError("--network", True, "not with --dry-run: dry runs stay on localhost")
+    if args.target == "dvrk":
+        from hardware_if.network import apply_local_ros_env
+
+        if args.network:
+            os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+        else:
+            apply_local_ros_env(args.domain_id)  # before rclpy starts
+
+    from hardware_if.deploy import DeployOptions, deploy
+
+    safety_config = None
+    if args.safety_config is not None:
+        from safety.config import load_safety_config
+
+        safety_config = load_safety_config(args.safety_config)
+    record = Path(args.record) if args.record else Path("runs") / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+    options = DeployOptions(
+        policy=args.policy,
+        target=args.target,
+        record=record,
+        task=args.task,
+        arm=args.arm,
+        rate_hz=args.rate,
+        dry_run=args.dry_run,
+        safety_config=safety_config,
+        episodes=args.episodes,
+        seed=args.seed,
+        wait_s=args.wait,
+    )
+    report = deploy(options, echo=lambda line: print(line, flush=True))
+    for line in report.lines():
+        print(line)
+    if report.fault:
+        print(f"tissue-retract deploy: stopped, the arm is held: {report.fault}", file=sys.stderr)
+    return report.exit_code
