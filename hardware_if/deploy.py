@@ -328,7 +328,9 @@ def _dvrk_episode(
     ticks_per_step = max(1, round(cfg.physics.step_s / chain.control_period_s))
     stiffness = chain.config.stiffness_prior_n_per_m
     measured = client.measure()
-    chain.set_base_frame(view.base_frame())
+    # The chain works about the RCM, as in the simulation (its workspace box is an RCM box): the policy's
+    # base-frame step is rotated into the RCM's axes and given as a local delta.
+    rotation_rcm_to_base = view.base_frame()[:3, :3]
     chain.reset(measured)
     reset()
     recorder.write("/deploy/event", {"kind": "episode_start", "episode": episode, "seed": seed})
@@ -343,7 +345,8 @@ def _dvrk_episode(
             "/deploy/action", {"episode": episode, "step": step, "action": action, "observation": observation}
         )
         jaw = cfg.jaw_closed_rad if action[4] < 0 else cfg.jaw_open_rad
-        delta = CartesianDelta(action[:3] * cfg.max_step_m, float(action[3]) * cfg.max_yaw_rad, jaw, "base")
+        step_rcm = rotation_rcm_to_base.T @ (action[:3] * cfg.max_step_m)
+        delta = CartesianDelta(step_rcm, float(action[3]) * cfg.max_yaw_rad, jaw, "local")
         chain.set_target(delta, client.measure())
         for _ in range(ticks_per_step):
             measured = client.measure()
