@@ -332,12 +332,15 @@ class Policy:
         self.agent = agent
         self.meta = meta
         action = meta["spaces"]["action"]
-        self.low = np.asarray(action["low"], dtype=np.float32)
-        self.high = np.asarray(action["high"], dtype=np.float32)
+        low = np.asarray(action["low"], dtype=np.float32)
+        high = np.asarray(action["high"], dtype=np.float32)
+        # centre + half-range * a: exactly the actor's output for the usual Box(-1, 1).
+        self.centre = 0.5 * (high + low)
+        self.half_range = 0.5 * (high - low)
 
     def __call__(self, obs: Mapping[str, np.ndarray]) -> np.ndarray:
         a = self.agent.act(np.asarray(obs["observation"]), np.asarray(obs["desired_goal"]))
-        return (self.low + 0.5 * (a + 1.0) * (self.high - self.low)).astype(np.float32)
+        return (self.centre + self.half_range * a).astype(np.float32)
 
 
 def load_policy(path: str | Path, env: gym.Env[Any, Any]) -> Callable[[Mapping[str, np.ndarray]], np.ndarray]:
