@@ -47,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
         physics = env.unwrapped.config.physics
         state_rate, state_cpu_rate, unstable = _rate(env, args.steps, render=False)
         render_rate, render_cpu_rate, _ = _rate(env, args.render_steps, render=True)
+        controller = env.unwrapped.controller_name
     finally:
         env.close()
     results = {
@@ -61,6 +62,8 @@ def run(args: argparse.Namespace) -> int:
         "time_step_s": physics.time_step_s,
         "solver_iterations": physics.solver_iterations,
         "tissue_resolution": env.unwrapped.config.tissue.resolution,
+        "control_rate_hz": 1.0 / physics.control_period_s,
+        "controller": controller,
         "cpus_allowed": len(os.sched_getaffinity(0)),
         "load_average_1min": os.getloadavg()[0],
     }
@@ -74,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     )
     print(
         f"settings: {physics.substeps} substeps x {physics.time_step_s:.5f} s, {physics.solver_iterations} solver "
-        f"iterations, {results['tissue_resolution']}x{results['tissue_resolution']} flap; unstable steps: {unstable}; "
+        f"iterations, {results['tissue_resolution']}x{results['tissue_resolution']} flap; {controller}; "
+        f"unstable steps: {unstable}; "
         f"cpus allowed {results['cpus_allowed']}, load {results['load_average_1min']:.2f}"
     )
     if args.json:
