@@ -295,6 +295,7 @@ def _deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorde
                         "task", options.task, f"task topics /{options.arm}/task/site and goal (none received)"
                     )
                 time.sleep(0.1)  # let a reset scene's first state arrive everywhere
+                echo(f"episode {episode}: started (seed {seed})")
                 entry = _dvrk_episode(options, report, recorder, client, view, chain, policy, reset, episode, seed)
                 report.episodes.append(entry)
                 recorder.write("/deploy/event", {"kind": "episode_end", **entry})

@@ -1,0 +1,157 @@
+"""Deploying over real loopback DDS: ``sim-dvrk --task lift`` and ``deploy`` as child processes.
+
+The deploy runs the scripted expert through the control chain with the PsmClient backend; the tests
+check a whole Task I episode, a dry run that publishes nothing on motion topics, the recording and its
+replay, and a hold (not a crash) when the simulated console dies mid-episode.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import rclpy
+from ros_process import start_sim_dvrk, stop
+from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
+
+from hardware_if.crtk import MOTION_TOPICS, ArmTopics, periodic_qos
+from hardware_if.deploy import EXIT_HOLD
+from hardware_if.psm_client import PsmClient
+from hardware_if.replay import load_recording, summarize_recording
+
+#: A seed whose Task I episode the scripted expert completes in the simulation.
+SEED = "2"
+DEPLOY_TIMEOUT_S = 240.0
+
+
+def _deploy(env: dict[str, str], record: Path, *extra: str) -> subprocess.Popen[str]:
+    command = [sys.executable, "-m", "psm_control", "deploy", "--policy", "scripted", "--target", "dvrk"]
+    command += ["--task", "lift", "--seed", SEED, "--domain-id", env["ROS_DOMAIN_ID"], "--record", str(record)]
+    command += ["--wait", "60", *extra]
+    return subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+@pytest.fixture
+def sim(ros_env: dict[str, str]) -> Iterator[subprocess.Popen[str]]:
+    """A fresh ``sim-dvrk --task lift`` for one test."""
+    process = start_sim_dvrk(ros_env, "--task", "lift", "--seed", SEED)
+    yield process
+    stop(process)
+
+
+@pytest.fixture(scope="module")
+def lift_run(tmp_path_factory: pytest.TempPathFactory, ros_env: dict[str, str]) -> tuple[int, str, Path]:
+    """One deploy of a Task I episode against sim-dvrk: (exit status, output, recording)."""
+    record = tmp_path_factory.mktemp("deploy") / "lift.mcap"
+    sim = start_sim_dvrk(ros_env, "--task", "lift", "--seed", SEED)
+    try:
+        deploy = _deploy(ros_env, record)
+        output, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
+    finally:
+        stop(sim)
+    return deploy.returncode, output, record
+
+
+def test_lift_episode_over_ros_succeeds(lift_run: tuple[int, str, Path]) -> None:
+    """A full Task I episode deployed over ROS through the chain against sim-dvrk --task lift succeeds."""
+    status, output, record = lift_run
+    assert status == 0, output
+    assert "episode 0 seed 2: success" in output, output
+    summary = summarize_recording(load_recording(record))
+    assert summary.commands == summary.commands_sent > 0
+    assert summary.holds == []
+    assert summary.peak_force_n > 0.0  # the flap was lifted: the tissue force reached body/measured_cf
+    assert summary.episodes[0]["success"] is True
+
+
+def test_replay_prints_summary_and_plot(lift_run: tuple[int, str, Path], tmp_path: Path) -> None:
+    """replay on a deploy's MCAP prints its summary and writes a non-empty plot."""
+    _, _, record = lift_run
+    plot = tmp_path / "run.png"
+    done = subprocess.run(
+        [sys.executable, "-m", "psm_control", "replay", str(record), "--plot", str(plot)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    for text in ("commands:", "peak force:", "tracking error", "episode 0: success=True"):
+        assert text in done.stdout, done.stdout
+    assert plot.stat().st_size > 1000
+
+
+def test_dry_run_publishes_nothing_on_motion_topics(
+    sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    """A dry run against an enabled, homed arm sends nothing on motion topics, and reports and records."""
+    record = tmp_path / "dry.mcap"
+    counts = dict.fromkeys(MOTION_TOPICS, 0)
+    rclpy.init()
+    try:
+        with PsmClient("PSM1", node_name=f"dry_run_watch_{time.monotonic_ns()}") as psm:
+            psm.wait_for_measurement(timeout_s=60.0)
+            psm.enable(timeout_s=20.0)
+            psm.home(timeout_s=20.0)
+            topics = ArmTopics("PSM1")
+            lock = threading.Lock()
+
+            def counter(name: str) -> Callable[[JointState], None]:
+                def callback(_: JointState) -> None:
+                    with lock:
+                        counts[name] += 1
+
+                return callback
+
+            from geometry_msgs.msg import PoseStamped  # type: ignore[import-untyped]
+
+            for name in MOTION_TOPICS:
+                kind = PoseStamped if name.endswith("_cp") else JointState
+                psm.create_subscription(kind, topics.topic(name), counter(name), periodic_qos())
+            deploy = _deploy(ros_env, record, "--dry-run")
+            output, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
+            time.sleep(0.5)
+    finally:
+        rclpy.shutdown()
+    assert deploy.returncode == 0, output
+    assert counts == dict.fromkeys(MOTION_TOPICS, 0), counts
+    assert "dry run (nothing published on motion topics)" in output
+    assert "would have sent" in output and "predicted peak force" in output
+    recording = load_recording(record)
+    summary = summarize_recording(recording)
+    assert summary.dry_run and summary.commands > 0 and summary.commands_sent == 0
+    assert recording.report["commands_sent"] == 0
+
+
+def test_killing_sim_dvrk_mid_episode_holds_and_reports(
+    sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    """Killing sim-dvrk mid-episode makes deploy hold, say why, record it and exit with status 4."""
+    record = tmp_path / "killed.mcap"
+    deploy = _deploy(ros_env, record)
+    assert deploy.stdout is not None
+    lines: list[str] = []
+    deadline = time.monotonic() + DEPLOY_TIMEOUT_S
+    while time.monotonic() < deadline:
+        line = deploy.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if "started" in line:
+            break
+    assert any("started" in line for line in lines), "".join(lines)
+    time.sleep(0.5)
+    sim.send_signal(signal.SIGKILL)
+    sim.wait(timeout=30)
+    rest, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
+    output = "".join(lines) + rest
+    assert deploy.returncode == EXIT_HOLD, output
+    assert "the arm is held" in output and "HOLD:" in output, output
+    assert "Traceback" not in output, output
+    holds = summarize_recording(load_recording(record)).holds
+    assert holds and any(reason in holds[0] for reason in ("stale", "publisher gone")), holds
