@@ -4,6 +4,12 @@ The failure classes replace the paper's by-hand classification: an unsuccessful 
 the most serious event it saw (``sim_unstable`` > ``safety_stop`` > ``tissue_damage`` > ``grip_loss``
 > ``improper_grasp``), and ``timeout`` when none occurred. Success is scored at the final step, as in
 the paper's evaluation.
+
+The safety figures come from what the joints really did, step by step: ``joint_limit_violations``
+counts steps with a joint outside the PSM's limits, ``workspace_violation_mm`` is the largest distance
+of the tool tip outside the control chain's workspace box (about the RCM), ``min_insertion_margin_m``
+the least insertion past the dVRK's 45 mm minimum, and ``safety_stops``/``interventions`` add up the
+chain's stopped ticks and the constraints that changed a command (once per constraint and step).
 """
 
 from __future__ import annotations

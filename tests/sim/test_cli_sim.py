@@ -42,16 +42,24 @@ def test_demo_writes_demonstrations_and_video(tmp_path: Path) -> None:
 
 
 def test_evaluate_writes_the_documented_json(tmp_path: Path) -> None:
-    """`evaluate --json` writes summary and per-episode keys, failure classes included."""
-    path = tmp_path / "eval.json"
+    """`evaluate --json --safety-config` writes summary and per-episode keys, safety figures included."""
+    path, config = tmp_path / "eval.json", tmp_path / "safety.toml"
+    config.write_text("force_limit_n = 1.5\n")
     result = _cli(
-        "evaluate", "--policy", "random", "--task", "2", "--episodes", "2", "--seeds", "1", "--json", str(path)
-    )
+        "evaluate", "--policy", "random", "--task", "2", "--episodes", "2", "--seeds", "1", "--json", str(path),
+        "--safety-config", str(config),
+    )  # fmt: skip
     assert result.returncode == 0, result.stderr
     report = json.loads(path.read_text())
+    summary = report["summary"]
     for key in ("success_rate", "ci95", "episodes", "peak_force_n", "grip_losses", "tissue_damage", "sim_unstable"):
-        assert key in report["summary"]
-    assert "env_steps_per_s" in report["summary"]
+        assert key in summary
+    assert "env_steps_per_s" in summary
+    assert summary["force_limit_n"] == 1.5 and summary["safety"] is True
+    for key in ("workspace_violation_mm", "min_insertion_margin_m"):
+        assert isinstance(summary[key], float) and summary[key] >= 0.0
+    for key in ("joint_limit_violations", "safety_stops", "interventions"):
+        assert isinstance(summary[key], int)
     assert {"seed", "success", "steps", "peak_force_n", "failure_class"} <= set(report["episodes"][0])
 
 

@@ -186,3 +186,18 @@ def test_a_commanded_step_is_tracked() -> None:
         assert np.all(per_step > 0.003) and np.all(per_step <= 0.005 + 1e-6)
     finally:
         env.close()
+
+
+def test_workspace_violation_is_measured_against_the_chains_box() -> None:
+    """info['workspace_violation_m'] is the tip's distance outside the chain's box (about the RCM), 0 inside."""
+    from safety.config import SafetyConfig
+
+    box = SafetyConfig(workspace_min_m=(-0.07, -0.07, -0.20), workspace_max_m=(0.07, 0.07, -0.15))
+    env = make_env("lift", safety_config=box)
+    try:
+        _, info = env.reset(seed=0)
+        tip_z = env.unwrapped.scene.configuration.local_pose()[2, 3]
+        assert info["workspace_violation_m"] == pytest.approx(tip_z - (-0.15), abs=1e-9)
+        assert info["workspace_violation_m"] > 0.01
+    finally:
+        env.close()
