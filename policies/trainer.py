@@ -94,12 +94,25 @@ class TrainResult:
     env_steps: int = 0
     train_seconds: float = 0.0
     update_seconds: float = 0.0
+    learning_steps: int = 0
+    learning_seconds: float = 0.0
+    learning_cpu_seconds: float = 0.0
     resumed_from: int = 0
 
     @property
     def steps_per_second(self) -> float:
         """Env steps per second of training, gradient updates included (evaluation excluded)."""
         return self.env_steps / self.train_seconds if self.train_seconds > 0 else float("nan")
+
+    @property
+    def learning_steps_per_second(self) -> float:
+        """Env steps per second once gradient updates run (after the random seed steps)."""
+        return self.learning_steps / self.learning_seconds if self.learning_seconds > 0 else float("nan")
+
+    @property
+    def learning_steps_per_cpu_second(self) -> float:
+        """Env steps per second of this process's CPU time once learning: the rate on an idle core."""
+        return self.learning_steps / self.learning_cpu_seconds if self.learning_cpu_seconds > 0 else float("nan")
 
     @property
     def final_success(self) -> float:
@@ -236,7 +249,7 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
     metrics: dict[str, float] = {}
     try:
         for episode_index in range(start_episode, spec.episodes):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             obs, _ = env.reset(seed=spec.seed * 1_000_003 + episode_index)
             o, ag, g, a, term = [obs["observation"]], [obs["achieved_goal"]], [], [], []
             while True:
@@ -260,9 +273,14 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
             buffer.add(episode)
             agent.observe_episode(episode.obs, episode.achieved_goal, episode.desired_goal)
             t1 = time.perf_counter()
-            if env_steps >= config.random_steps:
+            learning = env_steps >= config.random_steps
+            if learning:
                 metrics = agent.train(buffer, demo_buffer, reward_fn, config.updates_per_episode)
             t2 = time.perf_counter()
+            if learning:
+                result.learning_steps += len(episode.action)
+                result.learning_seconds += t2 - t0
+                result.learning_cpu_seconds += time.process_time() - c0
             result.train_seconds += t2 - t0
             result.update_seconds += t2 - t1
             result.env_steps += len(episode.action)

@@ -109,6 +109,12 @@ def run(args: argparse.Namespace) -> int:
             f"throughput: {result.steps_per_second:.1f} env steps/s including gradient updates "
             f"({result.env_steps} steps in {result.train_seconds:.1f} s; updates {100 * update_share:.0f} % of it)"
         )
+    if result.learning_steps:
+        print(
+            f"throughput once learning: {result.learning_steps_per_second:.1f} env steps/s "
+            f"({result.learning_steps} steps after the random seed steps, evaluation excluded; "
+            f"{result.learning_steps_per_cpu_second:.1f} per CPU-second of this process)"
+        )
     return 0
 
 
