@@ -1,0 +1,254 @@
+"""The paper's evaluation protocol: Table 1 and Table 2, run as parallel local processes.
+
+Table 1 trains each algorithm on Tasks I-III (``TissueRetract-Lift-v0``, ``-Target-v0``,
+``-MultiSite-v0``) with 100 demonstrations and seeds 1, 2, 3; Table 2 varies the demonstrations
+(25 / 50 / 100) on Task III. Each run is one ``train`` in its own process, in its own directory, so an
+interrupted reproduction resumes run by run. The outcome is written as markdown tables with our
+success rate (mean over seeds, 95 % t-interval) beside the paper's, and learning curves as PNG.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import multiprocessing
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from policies.config import ALGORITHMS, TrainConfig
+
+__all__ = [
+    "PAPER_TABLE1",
+    "PAPER_TABLE2",
+    "TASKS",
+    "Run",
+    "RunOutcome",
+    "plan",
+    "plot_curves",
+    "reproduce",
+    "run_all",
+    "tables",
+]
+
+#: Task label -> Gymnasium id, as in the paper.
+TASKS = {"I": "TissueRetract-Lift-v0", "II": "TissueRetract-Target-v0", "III": "TissueRetract-MultiSite-v0"}
+
+#: The paper's Table 1: success % (mean, 95 % CI) with 100 demonstrations, by task and algorithm.
+PAPER_TABLE1: dict[str, dict[str, tuple[float, float]]] = {
+    "I": {"ddpg": (83, 0.7), "sqil": (4, 7), "col": (94, 6), "ddpgbc": (95, 3), "dex": (66, 32)},
+    "II": {"ddpg": (85, 11), "sqil": (1, 1), "col": (86, 9), "ddpgbc": (86, 5), "dex": (82, 12)},
+    "III": {"ddpg": (80, 6), "sqil": (6, 4), "col": (76, 4), "ddpgbc": (65, 5), "dex": (58, 8)},
+}
+
+#: The paper's Table 2: success % on Task III by number of demonstrations.
+PAPER_TABLE2: dict[str, dict[int, float]] = {
+    "sqil": {25: 5, 50: 5, 100: 6},
+    "col": {25: 50, 50: 60, 100: 76},
+    "ddpgbc": {25: 62, 50: 62, 100: 65},
+    "dex": {25: 34, 50: 58, 100: 58},
+}
+
+
+@dataclass(frozen=True)
+class Run:
+    """One training run of the protocol."""
+
+    task: str
+    task_id: str
+    algo: str
+    seed: int
+    demos: int
+    episodes: int
+    eval_every: int
+    eval_episodes: int
+    out_dir: Path
+    overrides: tuple[tuple[str, Any], ...] = ()
+
+
+@dataclass
+class RunOutcome:
+    """What a run produced: its final success and its learning curve."""
+
+    run: Run
+    success: float
+    curve: list[tuple[int, float]] = field(default_factory=list)
+    wall_seconds: float = 0.0
+    steps_per_second: float = float("nan")
+
+
+def plan(
+    out_dir: Path,
+    *,
+    episodes: int = 1000,
+    tasks: Mapping[str, str] = TASKS,
+    algos: Sequence[str] = ALGORITHMS,
+    seeds: Sequence[int] = (1, 2, 3),
+    demos: int = 100,
+    ablation_task: str | None = "III",
+    ablation_demos: Sequence[int] = (25, 50),
+    eval_every: int = 50,
+    eval_episodes: int = 50,
+    overrides: Mapping[str, Any] | None = None,
+) -> list[Run]:
+    """The runs of Table 1 and of Table 2's extra demonstration counts (100 demos are shared with Table 1)."""
+    extra = tuple(sorted((overrides or {}).items()))
+    runs = []
+    grid: list[tuple[str, str, int]] = [(task, algo, demos) for task in tasks for algo in algos]
+    if ablation_task is not None and ablation_task in tasks:
+        grid += [(ablation_task, algo, n) for algo in algos if algo in PAPER_TABLE2 for n in ablation_demos]
+    for task, algo, n_demos in grid:
+        for seed in seeds:
+            run_dir = out_dir / "runs" / f"{task}-{algo}-d{n_demos}-s{seed}"
+            runs.append(
+                Run(task, tasks[task], algo, seed, n_demos, episodes, eval_every, eval_episodes, run_dir, extra)
+            )
+    return runs
+
+
+def _execute(run: Run) -> RunOutcome:
+    """Train one run (in a worker process); returns its outcome."""
+    from policies.trainer import RunSpec, train
+
+    start = time.perf_counter()
+    config = TrainConfig(algo=run.algo, **dict(run.overrides))
+    spec = RunSpec(
+        run.task_id, seed=run.seed, episodes=run.episodes, demos=run.demos if run.algo != "ddpg" else 0,
+        out_dir=run.out_dir, eval_every=run.eval_every, eval_episodes=run.eval_episodes,
+        command=f"tissue-retract train --task {run.task_id} --algo {run.algo} --demos {run.demos} "
+        f"--seed {run.seed} --episodes {run.episodes} --out {run.out_dir}",
+        progress=False, tensorboard=False,
+    )  # fmt: skip
+    result = train(spec, config)
+    curve = _read_curve(run.out_dir / "eval.csv")
+    success = curve[-1][1] if curve else result.final_success
+    return RunOutcome(run, success, curve, time.perf_counter() - start, result.learning_steps_per_second)
+
+
+def _read_curve(path: Path) -> list[tuple[int, float]]:
+    if not path.exists():
+        return []
+    with path.open() as f:
+        return [(int(row["episode"]), float(row["success_rate"])) for row in csv.DictReader(f)]
+
+
+def run_all(runs: Iterable[Run], jobs: int = 1) -> list[RunOutcome]:
+    """Train every run, ``jobs`` processes at a time (each process uses one torch thread)."""
+    runs = list(runs)
+    if jobs <= 1:
+        return [_execute(run) for run in runs]
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return list(pool.map(_execute, runs))
+
+
+def _mean_ci(values: Sequence[float]) -> tuple[float, float]:
+    """Mean and half-width of the 95 % Student-t interval (0 for a single value)."""
+    x = np.asarray(values, dtype=float)
+    if len(x) < 2:
+        return float(x.mean()), 0.0
+    t975 = {2: 12.706, 3: 4.303, 4: 3.182, 5: 2.776, 6: 2.571, 7: 2.447, 8: 2.365, 9: 2.306, 10: 2.262}
+    t = t975.get(len(x), 1.96)
+    return float(x.mean()), float(t * x.std(ddof=1) / math.sqrt(len(x)))
+
+
+def tables(outcomes: Sequence[RunOutcome], demos: int = 100) -> str:
+    """Markdown: Table 1 (ours beside the paper's) and, when present, Table 2."""
+    by: dict[tuple[str, str, int], list[float]] = {}
+    for o in outcomes:
+        by.setdefault((o.run.task, o.run.algo, o.run.demos), []).append(100 * o.success)
+    tasks = list(dict.fromkeys(o.run.task for o in outcomes))
+    algos = [a for a in ALGORITHMS if any(o.run.algo == a for o in outcomes)]
+
+    def cell(values: list[float] | None) -> str:
+        if not values:
+            return "-"
+        mean, ci = _mean_ci(values)
+        return f"{mean:.0f} +- {ci:.0f}"
+
+    lines = [f"### Table 1: success % ({demos} demonstrations; ours / paper)", ""]
+    lines.append("| Task | " + " | ".join(algos) + " |")
+    lines.append("|---|" + "---|" * len(algos))
+    for task in tasks:
+        row = []
+        for algo in algos:
+            paper = PAPER_TABLE1.get(task, {}).get(algo)
+            ref = f"{paper[0]:g} +- {paper[1]:g}" if paper else "-"
+            row.append(f"{cell(by.get((task, algo, demos)))} / {ref}")
+        lines.append(f"| {task} | " + " | ".join(row) + " |")
+    ablation = sorted(
+        {o.run.demos for o in outcomes if o.run.task == "III"} - {demos} | ({demos} if "III" in tasks else set())
+    )
+    if len(ablation) > 1:
+        lines += ["", "### Table 2: Task III success % by demonstrations (ours / paper)", ""]
+        lines.append("| Algorithm | " + " | ".join(str(n) for n in ablation) + " |")
+        lines.append("|---|" + "---|" * len(ablation))
+        for algo in (a for a in algos if a in PAPER_TABLE2):
+            row = [f"{cell(by.get(('III', algo, n)))} / {PAPER_TABLE2[algo].get(n, '-')}" for n in ablation]
+            lines.append(f"| {algo} | " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_curves(outcomes: Sequence[RunOutcome], path: Path, demos: int = 100) -> Path:
+    """One panel per task: mean evaluation success over seeds against training episodes, per algorithm."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tasks = list(dict.fromkeys(o.run.task for o in outcomes))
+    fig, axes = plt.subplots(1, len(tasks), figsize=(4.5 * len(tasks), 3.5), squeeze=False)
+    for ax, task in zip(axes[0], tasks, strict=True):
+        for algo in ALGORITHMS:
+            curves = [o.curve for o in outcomes if o.run.task == task and o.run.algo == algo and o.run.demos == demos]
+            curves = [c for c in curves if c]
+            if not curves:
+                continue
+            n = min(len(c) for c in curves)
+            episodes = [e for e, _ in curves[0][:n]]
+            mean = np.mean([[s for _, s in c[:n]] for c in curves], axis=0)
+            ax.plot(episodes, 100 * mean, marker="o", markersize=3, label=algo)
+        ax.set_title(f"Task {task}")
+        ax.set_xlabel("training episodes")
+        ax.set_ylabel("success %")
+        ax.set_ylim(-5, 105)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def reproduce(out_dir: Path, runs: Sequence[Run], jobs: int = 1) -> tuple[Path, list[RunOutcome]]:
+    """Run the protocol and write ``results.md`` and ``curves.png`` in ``out_dir``."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    outcomes = run_all(runs, jobs)
+    wall = time.perf_counter() - start
+    demos = max((r.demos for r in runs), default=100)
+    plot_curves(outcomes, out_dir / "curves.png", demos)
+    per_run = [
+        f"| {o.run.task} | {o.run.algo} | {o.run.demos} | {o.run.seed} | {100 * o.success:.0f} | "
+        f"{o.wall_seconds:.0f} | {o.steps_per_second:.0f} |"
+        for o in outcomes
+    ]
+    text = [
+        "# Reproduction of the seed paper's evaluation",
+        "",
+        f"{len(runs)} runs, {jobs} parallel processes, wall time {wall:.0f} s.",
+        "",
+        tables(outcomes, demos),
+        "![learning curves](curves.png)",
+        "",
+        "| Task | Algorithm | Demos | Seed | Success % | Wall time [s] | Env steps/s once learning |",
+        "|---|---|---|---|---|---|---|",
+        *per_run,
+    ]
+    path = out_dir / "results.md"
+    path.write_text("\n".join(text) + "\n")
+    return path, outcomes
