@@ -318,7 +318,10 @@ class ControlChain:
                     active |= bit
         else:
             dq = dq_nominal
-        next_state = self.smoother.step_to(current.q + dq)
+        try:
+            next_state = self.smoother.step_to(current.q + dq)
+        except TissueRetractError as e:
+            return self._stop(str(e))
         candidate = self._command(next_state.q, next_state.qd, next_state.qdd)
         if self.safety:
             verdict = self.verifier.verify(candidate)

@@ -153,6 +153,10 @@ class SafetyFilter:
         self._hard = KeptOsqp(sparse.identity(dof, format="csc"), hard_pattern, self._settings)
         self._slack = KeptOsqp(sparse.diags(self._P_diag, format="csc"), self._A_pattern, self._settings)
         self._iterations = 0
+        self._names = [limit.name for limit in self.limits]
+        self._report_order = np.argsort(np.array(self._bound + self._rowed, dtype=np.intp))
+        self._any_hard_row = bool(self._hard_row.any())
+        self._no_slack = np.zeros(len(self.limits))
 
     def _pattern(self, n_slack: int) -> tuple[sparse.csc_matrix, np.ndarray, np.ndarray]:
         """The fixed CSC pattern of ``A``, its constant values, and where the ``G S`` block's entries go."""
@@ -257,34 +261,33 @@ class SafetyFilter:
     ) -> tuple[LimitReport, ...]:
         """Per limit: active at ``dq``, violated by the nominal, and by how much; raise on a hard violation."""
         tolerance = 1e3 * self.hard_tolerance
-        count = len(self.limits)
-        worst = np.empty(count)
-        nominal_worst = np.empty(count)
-        slack = np.zeros(count)
-        if self._bound:
-            lower, upper = self._bound_lower, self._bound_upper
-            worst[self._bound] = np.maximum(dq - upper, lower - dq).max(axis=1)
-            nominal_worst[self._bound] = np.maximum(dq_nominal - upper, lower - dq_nominal).max(axis=1)
+        lower, upper = self._bound_lower, self._bound_upper
+        worst = np.maximum(dq - upper, lower - dq).max(axis=1)
+        nominal_worst = np.maximum(dq_nominal - upper, lower - dq_nominal).max(axis=1)
+        if float(worst.max(initial=-np.inf)) > self.hard_tolerance:
+            raise InfeasibleProblemError("safety_filter", "a joint bound is violated after the clip")
+        slack = self._no_slack
         if self.m_rows:
             excess = self._G @ z - self._h
-            hard = excess[self._hard_row]
-            if hard.size and float(hard.max()) > self.hard_tolerance:
-                raise InfeasibleProblemError(
-                    "safety_filter", f"hard limit violated by {float(hard.max()):.3g} after the solve"
-                )
-            worst[self._rowed] = np.maximum.reduceat(excess, self._row_starts)
-            nominal_worst[self._rowed] = np.maximum.reduceat(self._G @ z_nominal - self._h, self._row_starts)
-            if self.n_slack:
+            if self._any_hard_row:
+                hard = float(excess[self._hard_row].max())
+                if hard > self.hard_tolerance:
+                    raise InfeasibleProblemError("safety_filter", f"hard limit violated by {hard:.3g} after the solve")
+            worst = np.concatenate((worst, np.maximum.reduceat(excess, self._row_starts)))
+            nominal_excess = self._G @ z_nominal - self._h
+            nominal_worst = np.concatenate((nominal_worst, np.maximum.reduceat(nominal_excess, self._row_starts)))
+            if self.n_slack and sigma.any():
+                slack = np.zeros(len(self.limits))
                 slack[self._soft] = sigma * self._norm[self._soft_of_rowed]
-        if self._bound and float(worst[self._bound].max()) > self.hard_tolerance:
-            raise InfeasibleProblemError("safety_filter", "a joint bound is violated after the clip")
-        active = (worst >= -tolerance).tolist()
+        # Back from (bound limits, then the others) to the caller's order.
+        active = (worst[self._report_order] >= -tolerance).tolist()
+        nominal_worst = nominal_worst[self._report_order]
         intervened = (nominal_worst > tolerance).tolist()
         violation = np.maximum(nominal_worst, 0.0).tolist()
         slack_values = slack.tolist()
         return tuple(
-            LimitReport(limit.name, active[i], intervened[i], violation[i], slack_values[i])
-            for i, limit in enumerate(self.limits)
+            LimitReport(name, active[i], intervened[i], violation[i], slack_values[i])
+            for i, name in enumerate(self._names)
         )
 
     # -- solvers ------------------------------------------------------------------------------------

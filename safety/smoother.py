@@ -12,11 +12,13 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig
+from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, RuckigError
 
 from psm_control.errors import SafetyStopError
 
 __all__ = ["JointSmoother", "SmootherState"]
+
+_DUST = 1e-9  # velocity [rad/s, m/s] and acceleration below which a retry treats the joint as at rest
 
 
 class SmootherState(NamedTuple):
@@ -103,8 +105,16 @@ class JointSmoother:
     def _update(self) -> SmootherState:
         try:
             result = self._ruckig.update(self._input, self._output)
-        except RuntimeError as e:
-            raise SafetyStopError(f"smoother: Ruckig rejected the input ({e})") from e
+        except (RuntimeError, RuckigError):
+            # Ruckig 0.19 can fail to synchronise a joint that is at its target with a residual velocity
+            # or acceleration of ~1e-15 (floating-point dust after a stop, measured). Zeroing components
+            # below 1e-9 changes the motion by far less than any limit's tolerance; then try once more.
+            self._input.current_velocity = [v if abs(v) > _DUST else 0.0 for v in self._input.current_velocity]
+            self._input.current_acceleration = [a if abs(a) > _DUST else 0.0 for a in self._input.current_acceleration]
+            try:
+                result = self._ruckig.update(self._input, self._output)
+            except (RuntimeError, RuckigError) as e:
+                raise SafetyStopError(f"smoother: Ruckig rejected the input ({str(e).splitlines()[0]})") from e
         if result not in (Result.Working, Result.Finished):
             raise SafetyStopError(f"smoother: Ruckig returned {result}")
         self._output.pass_to_input(self._input)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from safety.limits.limit import FilterState, Limit
@@ -38,7 +40,10 @@ class JointAccelerationLimit(Limit):
         self.rows = self.acceleration.size
         self._G = np.zeros((self.rows, self.rows))
         self._h = np.full(self.rows, np.inf)
-        self._half_inverse = 0.5 / self.acceleration
+        self._half_inverse = (0.5 / self.acceleration).tolist()
+        self._step = self.max_step.tolist()
+        self._lower = self.lower.tolist()
+        self._upper = self.upper.tolist()
 
     def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
         """Row ``-sign(qd_i) dq_i <= -min(qd_i^2 / (2 a_i), step_i, room_i)`` per moving joint."""
@@ -51,7 +56,13 @@ class JointAccelerationLimit(Limit):
 
     def compute_joint_bounds(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
         """``dq_i >= d_i`` for a joint moving up, ``dq_i <= -d_i`` moving down; ``d_i`` as in the rows."""
-        qd = state.qd
-        room = np.where(qd > 0.0, self.upper - state.q, state.q - self.lower)
-        distance = np.maximum(np.minimum(np.minimum(qd * qd * self._half_inverse, self.max_step), room), 0.0)
-        return np.where(qd > 0.0, distance, -np.inf), np.where(qd < 0.0, -distance, np.inf)
+        # Six joints: plain floats are several times quicker than a dozen tiny NumPy calls.
+        q, qd = state.q.tolist(), state.qd.tolist()
+        lower = [-math.inf] * len(q)
+        upper = [math.inf] * len(q)
+        for i, v in enumerate(qd):
+            if v > 0.0:
+                lower[i] = max(min(v * v * self._half_inverse[i], self._step[i], self._upper[i] - q[i]), 0.0)
+            elif v < 0.0:
+                upper[i] = -max(min(v * v * self._half_inverse[i], self._step[i], q[i] - self._lower[i]), 0.0)
+        return np.array(lower), np.array(upper)
