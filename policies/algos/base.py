@@ -9,7 +9,8 @@ happen at once in :meth:`Agent.train`, which keeps the per-update Python overhea
 from __future__ import annotations
 
 import abc
-from collections.abc import Iterable
+import contextlib
+from collections.abc import Iterable, Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -20,7 +21,7 @@ from policies.buffers import Batch, EpisodeBuffer, RewardFn
 from policies.config import TrainConfig
 from policies.normalizer import Normalizer
 
-__all__ = ["Agent", "Dims", "TensorBatch", "polyak"]
+__all__ = ["Agent", "Dims", "TensorBatch", "frozen", "polyak"]
 
 
 class Dims(NamedTuple):
@@ -51,9 +52,25 @@ class TensorBatch(NamedTuple):
 
 
 @torch.no_grad()
-def polyak(target: nn.Module, online: nn.Module, tau: float) -> None:
-    """target <- (1 - tau) target + tau online, for every parameter."""
-    torch._foreach_lerp_(list(target.parameters()), list(online.parameters()), tau)
+def polyak(target: list[torch.Tensor], online: list[torch.Tensor], tau: float) -> None:
+    """target <- (1 - tau) target + tau online, for paired parameter lists (one multi-tensor op)."""
+    torch._foreach_lerp_(target, online, tau)
+
+
+@contextlib.contextmanager
+def frozen(params: list[torch.Tensor]) -> Iterator[None]:
+    """Build graphs in which ``params`` are constants: gradients flow through, not into, them.
+
+    Parameter lists are cached by the agents: iterating a module's parameters on every update costs
+    as much as a small layer's arithmetic.
+    """
+    for p in params:
+        p.requires_grad_(False)
+    try:
+        yield
+    finally:
+        for p in params:
+            p.requires_grad_(True)
 
 
 def adam(groups: Iterable[tuple[Iterable[torch.Tensor], float]]) -> torch.optim.Adam:

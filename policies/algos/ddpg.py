@@ -17,7 +17,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812 (the conventional name)
 
-from policies.algos.base import Agent, TensorBatch, adam, polyak
+from policies.algos.base import Agent, TensorBatch, adam, frozen, polyak
 from policies.networks import Critic, DeterministicActor
 
 __all__ = ["DDPG"]
@@ -35,6 +35,9 @@ class DDPG(Agent):
         self.actor_target = copy.deepcopy(self._actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
         self.optimizer = adam([(self._actor.parameters(), c.lr_actor), (self.critic.parameters(), c.lr_critic)])
+        self.critic_params: list[torch.Tensor] = list(self.critic.parameters())
+        self.target_params: list[torch.Tensor] = [*self.critic_target.parameters(), *self.actor_target.parameters()]
+        self.online_params: list[torch.Tensor] = [*self.critic_params, *self._actor.parameters()]
 
     @property
     def actor(self) -> nn.Module:
@@ -79,18 +82,13 @@ class DDPG(Agent):
         critic_loss = F.mse_loss(self.critic(cb.x, cb.action), target)
         # The actor's gradient flows through the critic's input only: with the critic's weights frozen
         # while the actor loss is built, one backward pass gives each network the gradient of its own loss.
-        self.critic.requires_grad_(False)
-        try:
+        with frozen(self.critic_params):
             actor_loss, metrics = self.actor_loss(batch, demo)
-        finally:
-            self.critic.requires_grad_(True)
         self.optimizer.zero_grad(set_to_none=True)
         (critic_loss + actor_loss).backward()
         self.optimizer.step()
 
-        tau = self.config.tau
-        polyak(self.critic_target, self.critic, tau)
-        polyak(self.actor_target, self._actor, tau)
+        polyak(self.target_params, self.online_params, self.config.tau)
         metrics["critic_loss"] = critic_loss.item()
         metrics["actor_loss"] = actor_loss.item()
         return metrics

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812 (the conventional name)
 
-from policies.algos.base import Agent, TensorBatch, adam, polyak
+from policies.algos.base import Agent, TensorBatch, adam, frozen, polyak
 from policies.networks import GaussianActor, TwinCritic
 
 __all__ = ["SQIL"]
@@ -33,6 +33,8 @@ class SQIL(Agent):
         self._actor = GaussianActor(self.in_dim, self.dims.action, h)
         self.critic = TwinCritic(self.in_dim, self.dims.action, h)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        self.critic_params: list[torch.Tensor] = list(self.critic.parameters())
+        self.target_params: list[torch.Tensor] = list(self.critic_target.parameters())
         self.log_alpha = torch.tensor([math.log(c.sac_init_temperature)], requires_grad=True)
         self.target_entropy = -float(self.dims.action)
         self.optimizer = adam(
@@ -78,17 +80,14 @@ class SQIL(Agent):
             target = b.reward + self.config.gamma * (1.0 - b.done) * next_v
         q1, q2 = self.critic(b.x, b.action)
         critic_loss = F.mse_loss(q1, target) + F.mse_loss(q2, target)
-        self.critic.requires_grad_(False)
-        try:
+        with frozen(self.critic_params):
             action, logp = self._actor.sample(b.x)
             q1_pi, q2_pi = self.critic(b.x, action)
-        finally:
-            self.critic.requires_grad_(True)
         actor_loss = (alpha * logp - torch.min(q1_pi, q2_pi)).mean()
         alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
         self.optimizer.zero_grad(set_to_none=True)
         (critic_loss + actor_loss + alpha_loss).backward()
         self.optimizer.step()
 
-        polyak(self.critic_target, self.critic, self.config.tau)
+        polyak(self.target_params, self.critic_params, self.config.tau)
         return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(), "alpha": float(alpha)}
