@@ -137,6 +137,8 @@ class ControlChain:
         self._latched = ""
         self._is_reset = False
         self._zeros = np.zeros(self.model.dof)
+        self._base_rotation = self._command_state.base_frame[:3, :3].copy()
+        self._base_translation = self._command_state.base_frame[:3, 3].copy()
         self._q_center = (self.model.lower + self.model.upper) / 2.0
         self._q_half = (self.model.upper - self.model.lower) / 2.0
         self._bits = [1 << i for i in range(len(self.limits))]
@@ -146,6 +148,8 @@ class ControlChain:
         for state in (self._command_state, self._measured_state, self._verifier_state):
             state.set_base_frame(transform_rcm_to_base)
         self.verifier.set_base_frame(self._command_state.base_frame)
+        self._base_rotation = self._command_state.base_frame[:3, :3].copy()
+        self._base_translation = self._command_state.base_frame[:3, 3].copy()
 
     # -- Controller protocol -------------------------------------------------------------------------
 
@@ -291,7 +295,8 @@ class ControlChain:
             upper = np.minimum(self.model.upper - q, self.step)
             dq_nominal = self.ik.solve(self._command_state, self._goal_local, lower, upper).dq
         force = -np.asarray(measured.force_n, dtype=float)  # force_n is the tissue's force on the tool
-        tool = self._command_state.measured_pose()[:3, 3]
+        base = self._base_rotation
+        tool = base @ self._command_state.local_pose()[:3, 3] + self._base_translation
         stiffness = self.stiffness.update(tool, force)
         interventions: tuple[str, ...] = ()
         intervened = active = 0
@@ -300,7 +305,7 @@ class ControlChain:
                 current.q,
                 current.qd,
                 tool,
-                self._command_state.base_jacobian()[:3],
+                base @ self._command_state.local_jacobian()[:3],
                 force,
                 stiffness,
                 self.control_period_s,

@@ -21,6 +21,7 @@ re-checked: a violation above the tolerance raises, never passes.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from typing import Any, NamedTuple
@@ -254,7 +255,8 @@ class SafetyFilter:
             solved = True
         dq = z * self._scale
         reports = self._reports(dq_nominal, dq, z_nominal, z, sigma)
-        return FilterResult(dq, reports, solved, float(np.linalg.norm(z - z_nominal)), self._iterations)
+        change = z - z_nominal
+        return FilterResult(dq, reports, solved, math.sqrt(float(change @ change)), self._iterations)
 
     def _reports(
         self, dq_nominal: np.ndarray, dq: np.ndarray, z_nominal: np.ndarray, z: np.ndarray, sigma: np.ndarray

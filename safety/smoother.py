@@ -57,6 +57,10 @@ class JointSmoother:
         self._input.max_acceleration = [float(a) for a in acceleration_limit]
         self._input.max_jerk = [float(j) for j in jerk_limit]
         self._zeros = [0.0] * self.dof
+        self._input.control_interface = ControlInterface.Position
+        self._input.target_velocity = self._zeros
+        self._input.target_acceleration = self._zeros
+        self._braking = False
         self.reset(np.zeros(self.dof))
 
     def reset(self, q: np.ndarray) -> SmootherState:
@@ -89,17 +93,16 @@ class JointSmoother:
         Raises:
             SafetyStopError: Ruckig rejected the input or failed to compute a trajectory.
         """
-        self._input.control_interface = ControlInterface.Position
+        if self._braking:  # the target velocity and acceleration stay zero in both interfaces
+            self._input.control_interface = ControlInterface.Position
+            self._braking = False
         self._input.target_position = np.asarray(goal, dtype=float).tolist()
-        self._input.target_velocity = self._zeros
-        self._input.target_acceleration = self._zeros
         return self._update()
 
     def brake(self) -> SmootherState:
         """Advance one period of the quickest jerk-limited stop from the current state."""
         self._input.control_interface = ControlInterface.Velocity
-        self._input.target_velocity = self._zeros
-        self._input.target_acceleration = self._zeros
+        self._braking = True
         return self._update()
 
     def _update(self) -> SmootherState:

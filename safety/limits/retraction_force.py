@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from safety.limits.limit import FilterState, Limit
@@ -36,13 +38,13 @@ class RetractionForceLimit(Limit):
 
     def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
         """Row ``K n^T J dq <= F_max - |F|``, unused while ``|F| < min_force_n``."""
-        force = state.retraction_force_n
-        magnitude = float(np.linalg.norm(force))
-        if magnitude < self.min_force_n:
+        fx, fy, fz = state.retraction_force_n.tolist()
+        magnitude = math.sqrt(fx * fx + fy * fy + fz * fz)
+        if not magnitude >= self.min_force_n:  # also NaN
             self._G[:] = 0.0
             self._h[0] = np.inf
             return self._G, self._h
-        n = force / magnitude
-        self._G[0] = state.stiffness_n_per_m * (n @ state.tool_jacobian)
+        scale = state.stiffness_n_per_m / magnitude
+        np.dot((fx * scale, fy * scale, fz * scale), state.tool_jacobian, out=self._G[0])
         self._h[0] = self.force_limit_n - magnitude
         return self._G, self._h
