@@ -120,20 +120,27 @@ class TrainResult:
         return self.success_rates[-1][1] if self.success_rates else float("nan")
 
 
-def ensure_registered(task_id: str) -> None:
-    """Make ``task_id`` known to Gymnasium, importing the simulation package only when needed.
+def ensure_registered(task_id: str) -> str:
+    """Make a task known to Gymnasium, importing the simulation package only when needed.
+
+    Returns:
+        The Gymnasium id: ``task_id`` itself, or the simulation's id for a short name (``lift``, ``III``).
 
     Raises:
         UnknownVariantError: No such task after importing ``sim``.
     """
     importlib.import_module("policies")
     if task_id in gym.registry:
-        return
+        return task_id
     with contextlib.suppress(ImportError):
-        importlib.import_module("sim")
+        sim_envs = importlib.import_module("sim.envs")
+        if task_id not in gym.registry:
+            with contextlib.suppress(UnknownVariantError):
+                return str(sim_envs.gym_id(task_id))
     if task_id not in gym.registry:
         known = sorted(k for k in gym.registry if k.startswith("TissueRetract-"))
         raise UnknownVariantError("task", task_id, known)
+    return task_id
 
 
 def evaluate(agent: Agent, env: gym.Env[Any, Any], episodes: int) -> float:

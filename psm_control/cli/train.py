@@ -28,7 +28,9 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
-        "--task", required=True, help="Gymnasium id, e.g. TissueRetract-Lift-v0 or TissueRetract-ToyReach-v0"
+        "--task",
+        required=True,
+        help="Gymnasium id (TissueRetract-Lift-v0, TissueRetract-ToyReach-v0, ...) or a short name (lift, III)",
     )
     parser.add_argument("--algo", choices=ALGOS, default="ddpg", help="algorithm (default: ddpg)")
     parser.add_argument("--demos", type=int, default=100, help="demonstration episodes (default: 100; unused by ddpg)")
@@ -69,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from policies.config import TrainConfig
-    from policies.trainer import RunSpec, train
+    from policies.trainer import RunSpec, ensure_registered, train
     from psm_control.errors import ConfigurationError
 
     overrides = parse_overrides(args.set)
@@ -80,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
                 "--set", name, "a TrainConfig field other than algo: " + ", ".join(sorted(known - {"algo"}))
             )
     config = TrainConfig(algo=args.algo, **overrides)  # type: ignore[arg-type]
+    args.task = ensure_registered(args.task)
     out = args.out if args.out is not None else Path("runs") / args.task / f"{args.algo}-s{args.seed}"
     command = shlex.join(["tissue-retract", *sys.argv[1:]]) if sys.argv[1:2] == ["train"] else _rebuild(args)
     spec = RunSpec(

@@ -91,3 +91,43 @@ def test_ddpg_her_learns_the_toy_reach_task(tmp_path: Path) -> None:
     )  # fmt: skip
     result = train(spec, TrainConfig(algo="ddpg"))
     assert result.final_success >= 0.9
+
+
+def test_demonstrations_from_a_file_in_the_simulation_layout(tmp_path: Path) -> None:
+    """A demos .npz in the layout of `tissue-retract demo --out` (observation, action, per-step goals) trains."""
+    import numpy as np
+
+    from policies.demos import collect_demos, expert_for, load_demos
+
+    env = gym.make(TOY_TASK_ID)
+    episodes = collect_demos(env, expert_for(TOY_TASK_ID), 3, seed=0)
+    goals = [np.vstack((e.desired_goal, e.desired_goal[-1:])) for e in episodes]
+    path = tmp_path / "demos.npz"
+    np.savez_compressed(
+        path,
+        observation=np.stack([e.obs for e in episodes]),
+        achieved_goal=np.stack([e.achieved_goal for e in episodes]),
+        desired_goal=np.stack(goals),
+        action=np.stack([e.action for e in episodes]),
+        reward=np.zeros((3, 50), np.float32),
+        seed=np.arange(3),
+        metadata='{"task": "toy"}',
+    )
+    loaded = load_demos(path, 2)
+    assert len(loaded) == 2
+    np.testing.assert_array_equal(loaded[1].desired_goal, episodes[1].desired_goal)
+    np.testing.assert_array_equal(loaded[1].action, episodes[1].action)
+    args = ["train", "--task", TOY_TASK_ID, "--algo", "ddpgbc", "--demos", "3", "--demos-file", str(path)]
+    args += [
+        "--episodes",
+        "1",
+        "--out",
+        str(tmp_path / "run"),
+        "--eval-episodes",
+        "1",
+        "--no-progress",
+        "--no-tensorboard",
+    ]
+    for item in TINY:
+        args += ["--set", item]
+    assert main(args) == 0
