@@ -155,6 +155,7 @@ class DifferentialIk:
             "verbose": False,
             "warm_starting": True,
             "check_termination": 5,
+            "scaling": 0,
         }
         self._damping = damping * np.eye(dof)
         self._sqrt_weights = np.sqrt(self.weights)
