@@ -8,7 +8,11 @@ import numpy as np
 
 from safety.limits.limit import FilterState, Limit
 
-__all__ = ["JointAccelerationLimit"]
+__all__ = ["AT_REST_SPEED", "JointAccelerationLimit"]
+
+#: Speeds below this count as at rest [rad/s or m/s]. Ruckig leaves float dust such as -2.9e-20 after a
+#: stop; taken as motion, its sign would forbid the joint from ever moving the other way.
+AT_REST_SPEED = 1e-9
 
 
 class JointAccelerationLimit(Limit):
@@ -47,7 +51,7 @@ class JointAccelerationLimit(Limit):
 
     def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
         """Row ``-sign(qd_i) dq_i <= -min(qd_i^2 / (2 a_i), step_i, room_i)`` per moving joint."""
-        direction = np.sign(state.qd)
+        direction = np.where(np.abs(state.qd) < AT_REST_SPEED, 0.0, np.sign(state.qd))
         np.fill_diagonal(self._G, -direction)
         room = np.where(direction > 0, self.upper - state.q, state.q - self.lower)
         distance = np.minimum(np.minimum(state.qd**2 / (2.0 * self.acceleration), self.max_step), room)
@@ -61,8 +65,8 @@ class JointAccelerationLimit(Limit):
         lower = [-math.inf] * len(q)
         upper = [math.inf] * len(q)
         for i, v in enumerate(qd):
-            if v > 0.0:
+            if v > AT_REST_SPEED:
                 lower[i] = max(min(v * v * self._half_inverse[i], self._step[i], self._upper[i] - q[i]), 0.0)
-            elif v < 0.0:
+            elif v < -AT_REST_SPEED:
                 upper[i] = -max(min(v * v * self._half_inverse[i], self._step[i], q[i] - self._lower[i]), 0.0)
         return np.array(lower), np.array(upper)

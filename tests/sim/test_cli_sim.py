@@ -9,8 +9,6 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.sim.conftest import needs_chain_reversal
-
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
@@ -18,7 +16,6 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
-@needs_chain_reversal
 def test_plain_demo_runs_an_expert_episode() -> None:
     """`demo` with no arguments runs one scripted Task III episode and prints a summary."""
     result = _cli("demo")
@@ -26,7 +23,6 @@ def test_plain_demo_runs_an_expert_episode() -> None:
     assert "TissueRetract-MultiSite-v0: scripted expert succeeded in 1/1" in result.stdout
 
 
-@needs_chain_reversal
 def test_demo_writes_demonstrations_and_video(tmp_path: Path) -> None:
     """`demo --out --video` writes a .npz of successful episodes with metadata, and a GIF."""
     out, video = tmp_path / "demos.npz", tmp_path / "episode.gif"

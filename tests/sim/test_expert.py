@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 from sim.evaluation import FAILURE_CLASSES, resolve_policy, run_episode, summarize
-from tests.sim.conftest import make_env, needs_chain_reversal
+from tests.sim.conftest import make_env
 
 
-@needs_chain_reversal
 def test_expert_succeeds_on_every_task(task: str) -> None:
     """The scripted expert reaches and holds the goal in a few episodes of each task."""
     env = make_env(task)
