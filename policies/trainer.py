@@ -193,7 +193,11 @@ class _Logger:
 
 
 def train(spec: RunSpec, config: TrainConfig) -> TrainResult:
-    """Train ``config.algo`` on ``spec.task_id``; returns where the policy is and how the run went."""
+    """Train ``config.algo`` on ``spec.task_id``; returns where the policy is and how the run went.
+
+    Sets this process's torch to one thread: for networks this small that is fastest, and it keeps
+    parallel runs (``policies.reproduce``) from oversubscribing the cores.
+    """
     torch.set_num_threads(1)
     ensure_registered(spec.task_id)
     env = gym.make(spec.task_id)
