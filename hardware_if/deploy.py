@@ -339,7 +339,10 @@ def _dvrk_episode(
     steps = 0
     next_tick = time.monotonic()
     fault_reported = False
+    step_end = time.monotonic()
     for step in range(steps_total):
+        if step:  # the task state the arm's last commands produced, not an older one (up to one period late)
+            view.listener.wait(4 * chain.control_period_s, after_s=step_end)
         observation = view.observation()
         action = np.clip(np.asarray(policy(observation), dtype=float).reshape(-1), -1.0, 1.0)
         recorder.write(
@@ -382,6 +385,7 @@ def _dvrk_episode(
             else:
                 next_tick = time.monotonic()  # behind: tick again at once, do not burst to catch up
         steps += 1
+        step_end = time.monotonic()
         if report.fault:
             break
     entry: dict[str, Any] = {"episode": episode, "seed": seed, "steps": steps, "peak_force_n": peak}

@@ -147,7 +147,10 @@ class RemoteTask:
         self.task = task
         self.client, self.listener = client, listener
         self.unwrapped = self
-        self._pending: collections.deque[np.ndarray] = collections.deque()
+        # The simulated expert reads the environment's queue of delayed actions: over ROS the grasped flag
+        # shows one step after the jaw closed (the console's state travels back), so the view reports one
+        # step of latency carrying no motion; the expert then waits that step before re-opening.
+        self._pending: collections.deque[np.ndarray] = collections.deque([np.zeros(5)])
         self._configuration = self.model.configuration()
         self.scene = SimpleNamespace(grasp=self)
 

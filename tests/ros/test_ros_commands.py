@@ -14,12 +14,11 @@ def _cli(env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
-def test_sim_dvrk_task_says_not_available(ros_env: dict[str, str]) -> None:
-    """sim-dvrk --task fails with a clear not-available message instead of serving a made-up scene."""
-    result = _cli(ros_env, "sim-dvrk", "--task", "1", "--domain-id", ros_env["ROS_DOMAIN_ID"])
+def test_sim_dvrk_unknown_task_is_refused(ros_env: dict[str, str]) -> None:
+    """sim-dvrk --task with an unknown task exits non-zero and names the task ids it knows."""
+    result = _cli(ros_env, "sim-dvrk", "--task", "nosuch", "--domain-id", ros_env["ROS_DOMAIN_ID"])
     assert result.returncode != 0
-    assert "not available" in result.stderr
-    assert result.stdout == ""
+    assert "nosuch" in result.stderr and "lift" in result.stderr, result.stderr
 
 
 def test_bench_ros_prints_latency_and_drops(ros_env: dict[str, str], tmp_path: Path) -> None:
