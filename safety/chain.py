@@ -137,6 +137,8 @@ class ControlChain:
         self._latched = ""
         self._is_reset = False
         self._zeros = np.zeros(self.model.dof)
+        self._negative_step = -self.step
+        self._jaw_step = float(self.model.spec.jaw_velocity_limit * self.control_period_s)
         self._base_rotation = self._command_state.base_frame[:3, :3].copy()
         self._base_translation = self._command_state.base_frame[:3, 3].copy()
         self._q_center = (self.model.lower + self.model.upper) / 2.0
@@ -248,8 +250,8 @@ class ControlChain:
         return ""
 
     def _command(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> JointCommand:
-        step = self.model.spec.jaw_velocity_limit * self.control_period_s
-        self._jaw += float(np.clip(self._jaw_goal - self._jaw, -step, step))
+        step = self._jaw_step
+        self._jaw += min(max(self._jaw_goal - self._jaw, -step), step)
         return JointCommand(q, qd, qdd, self._jaw, self._stamp)
 
     def _stop(self, reason: str, *, brake: bool = True) -> ControlOutput:
@@ -291,7 +293,7 @@ class ControlChain:
             dq_nominal = self._zeros
         else:
             q = current.q
-            lower = np.maximum(self.model.lower - q, -self.step)
+            lower = np.maximum(self.model.lower - q, self._negative_step)
             upper = np.minimum(self.model.upper - q, self.step)
             dq_nominal = self.ik.solve(self._command_state, self._goal_local, lower, upper).dq
         force = -np.asarray(measured.force_n, dtype=float)  # force_n is the tissue's force on the tool

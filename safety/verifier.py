@@ -59,6 +59,10 @@ class CommandVerifier:
         self._q_full = np.zeros(self._model.nq)
         self._tip = configuration.model.frame_ids.tool_tip
         self._base = configuration.base_frame
+        self._rotation = self._base[:3, :3].copy()
+        self._translation = self._base[:3, 3].copy()
+        self._box_center = (self.box_lower + self.box_upper) / 2.0
+        self._box_half = (self.box_upper - self.box_lower) / 2.0
         self.last_safe: JointCommand | None = None
         self.stops = 0
         # One comparison checks every joint's position, velocity and acceleration (and finiteness: NaN
@@ -71,6 +75,8 @@ class CommandVerifier:
     def set_base_frame(self, transform_rcm_to_base: np.ndarray) -> None:
         """Use a new base frame (4x4 pose of the RCM) for the workspace check."""
         self._base = np.array(transform_rcm_to_base, dtype=float)
+        self._rotation = self._base[:3, :3].copy()
+        self._translation = self._base[:3, 3].copy()
 
     def reset(self, command: JointCommand) -> None:
         """Accept ``command`` as the safe command to hold (the measured state at reset)."""
@@ -87,7 +93,10 @@ class CommandVerifier:
         """Return what is wrong with ``command`` ("" if nothing)."""
         q, qd, qdd = command.q, command.qd, command.qdd
         try:
-            joints_ok = bool((np.abs(np.concatenate((q, qd, qdd)) - self._center) <= self._half_width).all())
+            joints_ok = (
+                np.count_nonzero(np.abs(np.concatenate((q, qd, qdd)) - self._center) <= self._half_width)
+                == self._center.size
+            )
         except ValueError:  # wrong shapes: the detailed checks say which
             joints_ok = False
         if joints_ok and np.isfinite(command.jaw):
@@ -118,8 +127,10 @@ class CommandVerifier:
     def _workspace_problem(self, q: np.ndarray) -> str:
         self._q_full[: q.size] = q
         pin.forwardKinematics(self._model, self._data, self._q_full)
-        tip = self._base[:3, :3] @ pin.updateFramePlacement(self._model, self._data, self._tip).translation
-        tip += self._base[:3, 3]
+        tip = self._rotation @ pin.updateFramePlacement(self._model, self._data, self._tip).translation
+        tip += self._translation
+        if np.count_nonzero(np.abs(tip - self._box_center) <= self._box_half) == 3:
+            return ""
         outside = (tip < self.box_lower) | (tip > self.box_upper)
         if np.any(outside):
             i = int(np.argmax(outside))
