@@ -269,7 +269,7 @@ def _deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorde
     def on_fault(status: Any) -> None:
         faults.append(status.reason)
 
-    with ros_session():
+    with ros_session(signal_handlers=False):
         client = PsmClient(options.arm, on_fault=on_fault, listen_only=options.dry_run).start()
         listener = TaskListener(options.arm, listen_only=options.dry_run)
         try:

@@ -28,10 +28,22 @@ def require_ros() -> Any:
 
 
 @contextmanager
-def ros_session(args: list[str] | None = None) -> Iterator[None]:
-    """Initialise rclpy's default context for the block, and shut it down after (also on Ctrl-C)."""
+def ros_session(args: list[str] | None = None, *, signal_handlers: bool = True) -> Iterator[None]:
+    """Initialise rclpy's default context for the block, and shut it down after (also on Ctrl-C).
+
+    Args:
+        args: ROS arguments.
+        signal_handlers: Let rclpy handle Ctrl-C by shutting the context down (its default). False keeps
+            Python's own: Ctrl-C raises KeyboardInterrupt where the program is, so a control loop can
+            stop between two commands and report, instead of meeting a dead context mid-publish.
+    """
     rclpy = require_ros()
-    rclpy.init(args=args)
+    if signal_handlers:
+        rclpy.init(args=args)
+    else:
+        from rclpy.signals import SignalHandlerOptions
+
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         yield
     finally:

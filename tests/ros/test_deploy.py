@@ -160,3 +160,22 @@ def test_killing_sim_dvrk_mid_episode_holds_and_reports(
     assert "Traceback" not in output, output
     holds = summarize_recording(load_recording(record)).holds
     assert holds and any(reason in holds[0] for reason in ("stale", "publisher gone")), holds
+
+
+def test_ctrl_c_stops_deploy_cleanly(sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path) -> None:
+    """Ctrl-C mid-episode stops commanding between two ticks, reports, records it and exits 130."""
+    record = tmp_path / "interrupted.mcap"
+    deploy = _deploy(ros_env, record)
+    assert deploy.stdout is not None
+    lines: list[str] = []
+    for line in deploy.stdout:
+        lines.append(line)
+        if "started" in line:
+            break
+    time.sleep(0.5)
+    deploy.send_signal(signal.SIGINT)
+    rest, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
+    output = "".join(lines) + rest
+    assert deploy.returncode == 130, output
+    assert "interrupted (Ctrl-C)" in output and "Traceback" not in output, output
+    assert "Ctrl-C" in summarize_recording(load_recording(record)).holds
