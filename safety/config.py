@@ -113,10 +113,13 @@ class SafetyConfig:
             old when the tick that uses it runs.
         max_translation_m: Largest accepted translation in one policy target [m]; larger is refused.
         max_yaw_rad: Largest accepted yaw in one policy target [rad].
-        solver_eps: OSQP absolute and relative tolerance.
+        solver_eps: OSQP absolute and relative tolerance (of the filter's normalised rows; hard bounds are
+            clipped exactly and re-checked after every solve).
         solver_max_iter: OSQP iteration cap.
         hard_tolerance: Violation of a hard constraint after the solve above which the tick stops.
-        slack_penalty: Linear and quadratic penalty on the slack of soft constraints.
+        slack_penalty: Linear and quadratic penalty on the slack of soft constraints, per unit of
+            normalised slack (one unit: a violation as large as the limit's largest row moves in one full
+            step). While every soft row's multiplier stays below it, the slack is exactly zero.
     """
 
     arm: str = "classic"

@@ -21,7 +21,14 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from safety.config import FORCE_PRESETS, SafetyConfig, load_safety_config
+    from safety.config import (
+        DEADMAN_MIN_PERIODS,
+        FORCE_PRESETS,
+        MAX_CONTROL_RATE_HZ,
+        MIN_CONTROL_RATE_HZ,
+        SafetyConfig,
+        load_safety_config,
+    )
 
     config = load_safety_config(args.config) if args.config else SafetyConfig()
     spec = config.spec
@@ -52,7 +59,17 @@ def run(args: argparse.Namespace) -> int:
         ("workspace_tolerance_m", f"{config.workspace_tolerance_m:g}"),
         ("cbf_gamma", f"{config.cbf_gamma:g}"),
         ("horizon_s", f"{config.horizon_s:g}"),
-        ("deadman_timeout_s", f"{config.deadman_timeout_s:g}"),
+        (
+            "control_rate_hz",
+            f"{config.control_rate_hz:g} (allowed {MIN_CONTROL_RATE_HZ:g}-{MAX_CONTROL_RATE_HZ:g}; "
+            "the property tests find no hold at 50 Hz and above)",
+        ),
+        (
+            "deadman_timeout_s",
+            f"{config.deadman_timeout_s:g} (at least {DEADMAN_MIN_PERIODS} periods: "
+            f"{DEADMAN_MIN_PERIODS * config.control_period_s:g} s)",
+        ),
+        ("slack_penalty", f"{config.slack_penalty:g} (per unit of a soft limit's normalised slack)"),
         (
             "stiffness prior / min / max [N/m]",
             f"{config.stiffness_prior_n_per_m:g} / {config.stiffness_min_n_per_m:g} / {config.stiffness_max_n_per_m:g}",
