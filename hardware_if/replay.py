@@ -61,7 +61,8 @@ class RecordingSummary:
             f"safety stop ticks: {self.safety_stop_ticks}; holds: {len(self.holds)}"
             + "".join(f"\n  hold: {h}" for h in self.holds),
             f"peak force: {self.peak_force_n:.3f} N",
-            "tracking error max |command(t-1) - measured(t)|: "
+            ("command-to-arm distance max (dry run: nothing was sent) " if self.dry_run else "tracking error max ")
+            + "|command(t-1) - measured(t)|: "
             + ", ".join(f"{n} {v:.4g}" for n, v in zip(JOINT_NAMES, self.tracking_error_max, strict=True)),
         ]
         for e in self.episodes:
