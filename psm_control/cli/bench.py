@@ -1,15 +1,13 @@
 """``tissue-retract bench TARGET``: speed measurements that print numbers.
 
 Each target lives in its own module ``psm_control.cli.bench_<target>`` with ``add_arguments(parser)``
-and ``run(args) -> int``. A target whose module is not in this version says so and exits non-zero.
+and ``run(args) -> int``.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
-import sys
 
 __all__ = ["TARGETS", "add_parser", "run"]
 
@@ -30,20 +28,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser = subparsers.add_parser("bench", help="measure speed (env, chain, ros)", description=__doc__)
     targets = parser.add_subparsers(dest="target", metavar="TARGET", required=True)
     for name, summary in TARGETS.items():
-        built = importlib.util.find_spec(_module(name)) is not None
-        sub = targets.add_parser(name, help=summary if built else f"{summary} (not built yet)", description=summary)
+        sub = targets.add_parser(name, help=summary, description=summary)
         sub.add_argument("--json", metavar="FILE", default=None, help="also write the results as JSON")
-        if built:
-            importlib.import_module(_module(name)).add_arguments(sub)
+        importlib.import_module(_module(name)).add_arguments(sub)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run one benchmark target."""
-    from psm_control import __version__
-    from psm_control.cli import EXIT_NOT_BUILT
-
-    if importlib.util.find_spec(_module(args.target)) is None:
-        print(f"tissue-retract bench {args.target}: not built in version {__version__} yet.", file=sys.stderr)
-        return EXIT_NOT_BUILT
     return int(importlib.import_module(_module(args.target)).run(args))

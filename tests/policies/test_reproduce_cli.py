@@ -1,0 +1,57 @@
+"""`tissue-retract reproduce` runs as a user types it, at a tiny budget."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+
+def test_reproduce_writes_tables_beside_the_paper(tmp_path: Path) -> None:
+    """A one-run reproduction writes results.md with the paper's number beside ours, and the curves."""
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "psm_control",
+            "reproduce",
+            "--budget",
+            "2",
+            "--tasks",
+            "I",
+            "--algos",
+            "ddpg",
+            "--seeds",
+            "1",
+            "--demos",
+            "2",
+            "--no-ablation",
+            "--eval-episodes",
+            "2",
+            "--jobs",
+            "1",
+            "--out",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    text = (tmp_path / "results.md").read_text()
+    assert "83 +- 0.7" in text  # the paper's DDPG on Task I, beside ours
+    assert (tmp_path / "curves.png").stat().st_size > 1000
+
+
+def test_unknown_algorithm_is_refused() -> None:
+    """An algorithm outside the five is refused with the valid names."""
+    result = subprocess.run(
+        [sys.executable, "-m", "psm_control", "reproduce", "--algos", "ppo"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert result.returncode == 1
+    assert "ddpgbc" in result.stderr
