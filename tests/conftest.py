@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -24,3 +27,10 @@ def classic() -> PsmModel:
 def random_joints(model: PsmModel, rng: np.random.Generator, count: int) -> np.ndarray:
     """Uniform random joint vectors within the limits, shape (count, 6)."""
     return rng.uniform(model.lower, model.upper, size=(count, model.dof))
+
+
+def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    """Run ``tissue-retract ARGS`` as a user would, in a fresh interpreter, capturing its output."""
+    return subprocess.run(
+        [sys.executable, "-m", "psm_control", *args], capture_output=True, text=True, timeout=timeout, check=False
+    )

@@ -9,19 +9,14 @@ import pytest
 
 from psm_control.cli import SUBCOMMANDS
 from psm_control.cli.bench import TARGETS
+from tests.conftest import run_cli
 
 PROMISED = ("demo", "train", "evaluate", "deploy", "robustness", "tune-safety", "sim-dvrk", "replay", "bench", "safety")
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "psm_control", *args], capture_output=True, text=True, timeout=300, check=False
-    )
-
-
 def test_help_lists_every_subcommand() -> None:
     """--help lists every subcommand the interface promises."""
-    result = _cli("--help")
+    result = run_cli("--help")
     assert result.returncode == 0
     for name in PROMISED:
         assert name in SUBCOMMANDS
@@ -32,7 +27,7 @@ def test_version() -> None:
     """--version prints the package version."""
     from psm_control import __version__
 
-    result = _cli("--version")
+    result = run_cli("--version")
     assert result.returncode == 0
     assert __version__ in result.stdout
 
@@ -52,7 +47,7 @@ def test_every_subcommand_has_help_without_extras(command: list[str]) -> None:
 
 def test_kinematics_demo_agrees_three_ways() -> None:
     """The demo prints the tool-tip table and the three kinematics agree."""
-    result = _cli("demo", "--kinematics", "--arm", "si")
+    result = run_cli("demo", "--kinematics", "--arm", "si")
     assert result.returncode == 0, result.stderr
     assert "psm_si_420006" in result.stdout
     assert "largest disagreement" in result.stdout

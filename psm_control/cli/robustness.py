@@ -16,6 +16,23 @@ from pathlib import Path
 __all__ = ["add_parser", "run"]
 
 
+def add_sweep_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    """Options every sweep command shares: what to run, where, on how many processes."""
+    parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
+    parser.add_argument("--task", required=True, help="task id (lift, target, multisite, expose or a Gymnasium id)")
+    parser.add_argument("--seed", type=int, default=0, help="sweep seed (default 0)")
+    parser.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="local process pool (default) or Ray (RAY_ADDRESS or a local cluster)",
+    )
+    parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
+    parser.add_argument("--out", type=Path, default=None, help=f"output folder (default runs/{name}-TASK)")
+    parser.add_argument("--safety-config", type=Path, default=None, help="SafetyConfig TOML/YAML file")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the subcommand."""
     parser = subparsers.add_parser(
@@ -24,8 +41,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
-    parser.add_argument("--task", required=True, help="task id (lift, target, multisite, expose or a Gymnasium id)")
+    add_sweep_arguments(parser, "robustness")
     parser.add_argument(
         "--trials",
         type=int,
@@ -39,18 +55,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "NAME=VALUE, e.g. stiffness=0.3:3x,obs_noise=0:0.002,latency=0:3",
     )
     parser.add_argument("--mode", choices=("random", "grid"), default="random", help="sampling (default random)")
-    parser.add_argument("--seed", type=int, default=0, help="sweep seed (default 0)")
-    parser.add_argument(
-        "--backend",
-        choices=("local", "ray"),
-        default="local",
-        help="local process pool (default) or Ray (RAY_ADDRESS or a local cluster)",
-    )
-    parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/robustness-TASK)")
-    parser.add_argument("--safety-config", type=Path, default=None, help="SafetyConfig TOML/YAML file")
     parser.add_argument("--no-safety", action="store_true", help="ablation: run without the safety filter")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.set_defaults(func=run)
 
 

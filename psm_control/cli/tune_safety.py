@@ -14,6 +14,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from psm_control.cli.robustness import add_sweep_arguments
+
 if TYPE_CHECKING:
     from sim.tuning import SettingResult
 
@@ -28,8 +30,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
-    parser.add_argument("--task", required=True, help="task id")
+    add_sweep_arguments(parser, "tune-safety")
     parser.add_argument(
         "--grid",
         required=True,
@@ -43,12 +44,6 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         default=None,
         help="peak-force bound for the recommendation [N] (default: the default force limit)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the episodes (default 0)")
-    parser.add_argument("--backend", choices=("local", "ray"), default="local", help="execution backend")
-    parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
-    parser.add_argument("--safety-config", type=Path, default=None, help="base SafetyConfig file")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default runs/tune-safety-TASK)")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.set_defaults(func=run)
 
 
@@ -126,8 +121,10 @@ def run(args: argparse.Namespace) -> int:
     )
     failed = [r for r in records if "error" in r]
     if failed:
-        print(f"tune-safety: {len(failed)} of {len(records)} episodes failed; first error: {failed[0]['error']}",
-              file=sys.stderr)
+        print(
+            f"tune-safety: {len(failed)} of {len(records)} episodes failed; first error: {failed[0]['error']}",
+            file=sys.stderr,
+        )
         return 1
     results = setting_results(records, args.episodes)
     front = pareto_front(results)

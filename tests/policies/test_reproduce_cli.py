@@ -2,41 +2,32 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
+
+from tests.conftest import run_cli
 
 
 def test_reproduce_writes_tables_beside_the_paper(tmp_path: Path) -> None:
     """A one-run reproduction writes results.md with the paper's number beside ours, and the curves."""
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "psm_control",
-            "reproduce",
-            "--budget",
-            "2",
-            "--tasks",
-            "I",
-            "--algos",
-            "ddpg",
-            "--seeds",
-            "1",
-            "--demos",
-            "2",
-            "--no-ablation",
-            "--eval-episodes",
-            "2",
-            "--jobs",
-            "1",
-            "--out",
-            str(tmp_path),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        check=False,
+    result = run_cli(
+        "reproduce",
+        "--budget",
+        "2",
+        "--tasks",
+        "I",
+        "--algos",
+        "ddpg",
+        "--seeds",
+        "1",
+        "--demos",
+        "2",
+        "--no-ablation",
+        "--eval-episodes",
+        "2",
+        "--jobs",
+        "1",
+        "--out",
+        str(tmp_path),
     )
     assert result.returncode == 0, result.stderr
     text = (tmp_path / "results.md").read_text()
@@ -46,12 +37,6 @@ def test_reproduce_writes_tables_beside_the_paper(tmp_path: Path) -> None:
 
 def test_unknown_algorithm_is_refused() -> None:
     """An algorithm outside the five is refused with the valid names."""
-    result = subprocess.run(
-        [sys.executable, "-m", "psm_control", "reproduce", "--algos", "ppo"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    result = run_cli("reproduce", "--algos", "ppo")
     assert result.returncode == 1
     assert "ddpgbc" in result.stderr

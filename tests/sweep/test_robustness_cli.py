@@ -4,34 +4,17 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
+from tests.conftest import run_cli
 
-def _robustness(out: Path, *extra: str) -> subprocess.CompletedProcess[str]:
-    command = [
-        sys.executable,
-        "-m",
-        "psm_control",
-        "robustness",
-        "--policy",
-        "scripted",
-        "--task",
-        "lift",
-        "--trials",
-        "4",
-        "--vary",
-        "stiffness=0.5:2x,obs_white_m=0:0.001",
-        "--jobs",
-        "2",
-        "--out",
-        str(out),
-        "--no-progress",
-        *extra,
-    ]
-    return subprocess.run(command, capture_output=True, text=True, timeout=600, check=False)
+SWEEP = ("robustness", "--policy", "scripted", "--task", "lift", "--trials", "4", "--jobs", "2", "--no-progress")
+
+
+def _robustness(out: Path) -> subprocess.CompletedProcess[str]:
+    return run_cli(*SWEEP, "--vary", "stiffness=0.5:2x,obs_white_m=0:0.001", "--out", str(out))
 
 
 def test_sweep_writes_episodes_report_and_plots_then_resumes(tmp_path: Path) -> None:
@@ -60,25 +43,8 @@ def test_sweep_writes_episodes_report_and_plots_then_resumes(tmp_path: Path) -> 
 
 def test_unknown_parameter_is_refused_with_valid_names(tmp_path: Path) -> None:
     """Varying a parameter the simulation lacks fails before any episode runs, naming the valid ones."""
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "psm_control",
-            "robustness",
-            "--policy",
-            "scripted",
-            "--task",
-            "lift",
-            "--vary",
-            "stifness=1:2",
-            "--out",
-            str(tmp_path),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
+    result = run_cli(
+        "robustness", "--policy", "scripted", "--task", "lift", "--vary", "stifness=1:2", "--out", str(tmp_path)
     )
     assert result.returncode == 1
     assert "stiffness" in result.stderr and "tissue_size_m" in result.stderr

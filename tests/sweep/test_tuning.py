@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -13,6 +11,7 @@ from psm_control.errors import ConfigurationError, UnknownVariantError
 from safety.config import load_safety_config
 from sim.sweep import parse_ranges
 from sim.tuning import SettingResult, pareto_front, recommend, setting_results, tunable_fields, tuning_trials
+from tests.conftest import run_cli
 
 
 def _result(force_limit: float, successes: int, peak: float) -> SettingResult:
@@ -55,34 +54,25 @@ def test_invalid_settings_are_refused_before_running() -> None:
 
 def test_tune_safety_writes_a_loadable_recommendation(tmp_path: Path) -> None:
     """The command writes the settings table, a Pareto plot and a recommended config that loads back."""
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "psm_control",
-            "tune-safety",
-            "--policy",
-            "scripted",
-            "--task",
-            "lift",
-            "--grid",
-            "force_limit_n=0.2:2",
-            "--levels",
-            "2",
-            "--episodes",
-            "2",
-            "--jobs",
-            "2",
-            "--max-force-n",
-            "5",
-            "--out",
-            str(tmp_path),
-            "--no-progress",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        check=False,
+    result = run_cli(
+        "tune-safety",
+        "--policy",
+        "scripted",
+        "--task",
+        "lift",
+        "--grid",
+        "force_limit_n=0.2:2",
+        "--levels",
+        "2",
+        "--episodes",
+        "2",
+        "--jobs",
+        "2",
+        "--max-force-n",
+        "5",
+        "--out",
+        str(tmp_path),
+        "--no-progress",
     )
     assert result.returncode == 0, result.stderr
     summary = json.loads((tmp_path / "summary.json").read_text())
