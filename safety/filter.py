@@ -107,6 +107,8 @@ class SafetyFilter:
             self._slices[i] = slice(start, start + self.limits[i].rows)
             start += self.limits[i].rows
         self.m_rows = start
+        #: Rows of every limit together (as before the bound limits were merged); kept for callers.
+        self.m_limits = sum(limit.rows for limit in self.limits)
         rows_per_limit = [self.limits[i].rows for i in self._rowed]
         self._row_starts = np.cumsum([0, *rows_per_limit[:-1]]).astype(np.intp)
         self._row_owner = np.repeat(np.arange(len(self._rowed)), rows_per_limit).astype(np.intp)
