@@ -30,8 +30,10 @@ install: $(VENV)/.installed $(VENV)/.installed-ros
 
 install-dev: $(VENV)/.installed-dev $(VENV)/.installed-ros
 
+# The main job: the shipped Task III policy deployed in the simulation through the safety chain.
 run: install
-	$(BIN)/tissue-retract demo
+	$(BIN)/tissue-retract deploy --policy pretrained --target sim --task multisite --episodes 20 --seed 1000 \
+		--record runs/make-run.mcap
 
 test: install-dev
 	$(BIN)/python -m pytest

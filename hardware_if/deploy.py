@@ -123,6 +123,9 @@ class DeployReport:
                 f"{e['steps']} steps, peak force {e['peak_force_n']:.3f} N"
                 + (f", goal distance {1000 * e['goal_distance_m']:.1f} mm" if "goal_distance_m" in e else "")
             )
+        if self.episodes and not self.dry_run:
+            successes = sum(bool(e["success"]) for e in self.episodes)
+            out.append(f"  success: {successes}/{len(self.episodes)} episodes")
         verb = "would have sent" if self.dry_run else "sent"
         out.append(
             f"  commands: {self.commands} computed, {verb} {self.commands_sent if not self.dry_run else self.commands}"

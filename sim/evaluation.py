@@ -58,13 +58,15 @@ class EpisodeResult:
 
 
 def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
-    """A policy and its per-episode reset from ``scripted``, ``random``, ``module:callable`` or a checkpoint.
+    """A policy and its per-episode reset from ``scripted``, ``random``, ``pretrained`` (the shipped policy
+    of the env's task), ``module:callable`` or a checkpoint path.
 
     ``module:callable`` names a function of the observation dict, or a class built with the environment
     (``cls(env)``, as :class:`sim.pulling.AggressivePull`); a ``reset()`` method is called per episode.
 
     Raises:
-        ConfigurationError: The policy cannot be found or checkpoints are not supported yet.
+        ConfigurationError: The policy cannot be found.
+        CheckpointError: The checkpoint file is not a valid checkpoint or does not fit the environment.
     """
     if spec == "scripted":
         from sim.expert import ScriptedExpert
@@ -73,6 +75,10 @@ def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
         return expert, expert.reset
     if spec == "random":
         return (lambda _obs: env.action_space.sample()), (lambda: None)
+    if spec == "pretrained":
+        from policies.shipped import shipped_policy_path
+
+        spec = str(shipped_policy_path(env.spec.id if env.spec is not None else type(env.unwrapped).__name__))
     if ":" in spec and not spec.endswith((".pt", ".safetensors", ".zip")):
         module_name, _, attribute = spec.partition(":")
         try:
@@ -83,16 +89,9 @@ def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
             target = target(env)
         reset = getattr(target, "reset", None)
         return target, (reset if callable(reset) else (lambda: None))
-    try:
-        checkpoint = importlib.import_module("policies.checkpoint")
-    except ImportError:
-        checkpoint = None
-    loader = getattr(checkpoint, "load_policy", None)
-    if loader is None:
-        raise ConfigurationError(
-            "policy", spec, "'scripted', 'random' or 'module:callable' (checkpoints are not supported yet)"
-        )
-    policy = loader(spec, env)
+    from policies.checkpoint import load_policy
+
+    policy = load_policy(spec, env)
     reset = getattr(policy, "reset", None)
     return policy, (reset if callable(reset) else (lambda: None))
 
