@@ -74,6 +74,15 @@ class KeptOsqp:
         self._solver: osqp.OSQP | None = None
         self._direct: Any = None
 
+    def reset(self) -> None:
+        """Drop the workspace: the next solve starts cold, with the initial rho and no warm start.
+
+        OSQP carries its iterates and its adapted rho from one solve to the next; an episode must not
+        depend on the one before it (the same seed gives the same result whatever ran earlier).
+        """
+        self._solver = None
+        self._direct = None
+
     def solve(
         self,
         q: np.ndarray,
@@ -182,6 +191,10 @@ class DifferentialIk:
         J = configuration.local_jacobian()
         P, q = self._cost(J, self.errors(configuration, goal_local))
         return qpsolvers.Problem(P, q, lb=np.asarray(lower, dtype=float), ub=np.asarray(upper, dtype=float))
+
+    def reset(self) -> None:
+        """Forget solver state carried between solves (see :meth:`KeptOsqp.reset`)."""
+        self._qp.reset()
 
     def _cost(self, J: np.ndarray, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         JW = J.T * self.weights

@@ -161,6 +161,8 @@ class ControlChain:
         self._pending_stop = ""
         self._latched = ""
         self.stiffness.reset()
+        self.ik.reset()
+        self.filter.reset()
         self._is_reset = True
         self._stamp = float(measured.stamp_s) if np.isfinite(measured.stamp_s) else 0.0
         try:

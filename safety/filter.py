@@ -161,6 +161,11 @@ class SafetyFilter:
         self._any_hard_row = bool(self._hard_row.any())
         self._no_slack = np.zeros(len(self.limits))
 
+    def reset(self) -> None:
+        """Forget solver state carried between solves, so a new episode starts from the same state."""
+        self._hard.reset()
+        self._slack.reset()
+
     def _pattern(self, n_slack: int) -> tuple[sparse.csc_matrix, np.ndarray, np.ndarray]:
         """The fixed CSC pattern of ``A``, its constant values, and where the ``G S`` block's entries go."""
         dof = self.dof
