@@ -28,8 +28,7 @@ from hardware_if.replay import load_recording, summarize_recording
 #: A seed whose Task I episode the scripted expert completes in the simulation.
 SEED = "2"
 DEPLOY_TIMEOUT_S = 240.0
-#: Episodes of the Task I run. The control chain (being reworked) sometimes stalls under a constant
-#: full-step goal, in the simulation too (scripted lift, seed 6); one success of three shows the path.
+#: Episodes of the Task I run.
 EPISODES = 3
 
 
@@ -71,8 +70,7 @@ def test_lift_episode_over_ros_succeeds(lift_run: tuple[int, str, Path]) -> None
     assert summary.holds == []
     assert summary.peak_force_n > 0.0  # the flap was lifted: the tissue force reached body/measured_cf
     assert len(summary.episodes) == EPISODES
-    lifted = [e for e in summary.episodes if e["success"]]
-    assert lifted and all(e["goal_distance_m"] <= 0.005 for e in lifted), summary.episodes
+    assert all(e["success"] and e["goal_distance_m"] <= 0.005 for e in summary.episodes), summary.episodes
 
 
 def test_replay_prints_summary_and_plot(lift_run: tuple[int, str, Path], tmp_path: Path) -> None:
