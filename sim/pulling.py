@@ -1,6 +1,6 @@
 """An aggressive pulling policy: the expert's grasp, then full-speed pulls far past the goal.
 
-It exists to show the retraction-force limit at work (issue: the control chain's "Done when"): with the
+It exists to show the retraction-force limit at work: with the
 safety filter on, the chain must keep the peak force near its limit however hard the policy pulls;
 with ``--no-safety`` the same pulls stretch the flap until the grip slips. Use it as
 ``tissue-retract evaluate --policy sim.pulling:AggressivePull``.
