@@ -8,6 +8,7 @@ vectors. :class:`PsmConfiguration` is the one state carrier, in the manner of pi
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,6 +53,8 @@ class PsmModel:
         self.upper = self.spec.upper
         self.velocity_limit = self.spec.velocity_limit
         self.acceleration_limit = self.spec.acceleration_limit
+        self._dof = self.spec.dof
+        self._shape = (self._dof,)
 
     @classmethod
     def from_variant(cls, arm: str = "classic", tool: str | None = None) -> PsmModel:
@@ -79,11 +82,18 @@ class PsmModel:
             array = np.asarray(q, dtype=float)
         except (TypeError, ValueError) as e:
             raise JointVectorError(f"{name} is not a numeric vector: {q!r}") from e
-        if array.shape != (self.dof,):
+        if array.shape != self._shape:
             raise JointVectorError(
                 f"{name} must have shape ({self.dof},) for joints {self.spec.joint_names}, got {array.shape}",
                 value=array.shape,
             )
+        # The common case in one or two vector comparisons (NaN fails both, an overflowing sum only sends a
+        # finite vector to the loop); the loop names the first offending joint.
+        if strict:
+            if np.count_nonzero((array >= self.lower) & (array <= self.upper)) == self._dof:
+                return array
+        elif math.isfinite(array.sum()):
+            return array
         for joint, value in zip(self.spec.joints, array, strict=True):
             if not np.isfinite(value):
                 raise JointVectorError(f"{name}: joint {joint.name!r} is {value}", joint=joint.name, value=value)
@@ -139,6 +149,8 @@ class PsmConfiguration:
         self._q = np.zeros(model.dof)
         self._jaw = 0.0
         self._base = np.eye(4)
+        self._tip_pose: np.ndarray | None = None
+        self._tip_jacobian: np.ndarray | None = None
         if base_frame is not None:
             self.set_base_frame(base_frame)
         self.update(model.home() if q is None else q, jaw)
@@ -184,6 +196,8 @@ class PsmConfiguration:
         self._q_full[self.model.dof :] = jaw_value / 2.0
         pin.computeJointJacobians(self.model.model, self.data, self._q_full)
         pin.updateFramePlacements(self.model.model, self.data)
+        self._tip_pose = None
+        self._tip_jacobian = None
 
     def _frame_id(self, frame: str) -> int:
         if frame == TOOL_TIP_FRAME:
@@ -201,7 +215,9 @@ class PsmConfiguration:
 
     def local_pose(self) -> np.ndarray:
         """Tool-tip pose about the RCM: the dVRK's ``local/measured_cp``."""
-        return self.frame_pose_local(TOOL_TIP_FRAME)
+        if self._tip_pose is None:  # computed once per update; every caller gets its own copy
+            self._tip_pose = self.data.oMf[self.model.frame_ids.tool_tip].homogeneous
+        return self._tip_pose.copy()
 
     def measured_pose(self) -> np.ndarray:
         """Tool-tip pose in the base frame: the dVRK's ``measured_cp``."""
@@ -216,6 +232,12 @@ class PsmConfiguration:
 
         Expressed in the RCM frame's axes (Pinocchio ``LOCAL_WORLD_ALIGNED``), arm joints only.
         """
+        if frame == TOOL_TIP_FRAME:  # computed once per update; every caller gets its own copy
+            if self._tip_jacobian is None:
+                self._tip_jacobian = pin.getFrameJacobian(
+                    self.model.model, self.data, self.model.frame_ids.tool_tip, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+                )[:, : self.model.dof].copy()
+            return self._tip_jacobian.copy()
         jacobian = pin.getFrameJacobian(
             self.model.model, self.data, self._frame_id(frame), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         )

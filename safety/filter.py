@@ -160,6 +160,12 @@ class SafetyFilter:
         self._report_order = np.argsort(np.array(self._bound + self._rowed, dtype=np.intp))
         self._any_hard_row = bool(self._hard_row.any())
         self._no_slack = np.zeros(len(self.limits))
+        self._bound_limits = [(k, self.limits[i]) for k, i in enumerate(self._bound)]
+        self._row_limits = [(self._slices[i], self.limits[i]) for i in self._rowed]
+        self._n_bound = len(self._bound)
+        self._pair = np.zeros((2, 1, dof))  # [dq, dq_nominal], broadcast against the (bound limits, dof) bounds
+        self._excess = np.zeros((2, self.m_rows))  # [G z - h, G z_nominal - h]
+        self._row_starts_list = self._row_starts.tolist()
 
     def reset(self) -> None:
         """Forget solver state carried between solves, so a new episode starts from the same state."""
@@ -198,26 +204,27 @@ class SafetyFilter:
     # -- assembly -----------------------------------------------------------------------------------
 
     def _stack(self, state: FilterState) -> None:
-        limits = self.limits
-        for k, i in enumerate(self._bound):
-            lower, upper = limits[i].compute_joint_bounds(state)
-            self._bound_lower[k] = lower
-            self._bound_upper[k] = upper
-        lb = self._bound_lower.max(axis=0) / self._scale
-        ub = self._bound_upper.min(axis=0) / self._scale
+        lower, upper = self._bound_lower, self._bound_upper
+        for k, limit in self._bound_limits:
+            lower[k], upper[k] = limit.compute_joint_bounds(state)
+        lb = lower.max(axis=0)
+        lb /= self._scale
+        ub = upper.min(axis=0)
+        ub /= self._scale
         if np.count_nonzero(lb <= ub + self.hard_tolerance) != self.dof:
             raise InfeasibleProblemError("safety_filter", f"joint bounds conflict: lower {lb} above upper {ub}")
         self._lb = lb
-        self._ub = np.maximum(ub, lb)
-        for i, rows in self._slices.items():
-            G, h = limits[i].compute_qp_inequalities(state)
-            self._G[rows] = G
-            self._h[rows] = h
+        self._ub = np.maximum(ub, lb, out=ub)
         if self.m_rows:
-            self._G *= self._scale
-            norms = np.sqrt(np.einsum("ij,ij->i", self._G, self._G))
-            self._norm = np.maximum(np.maximum.reduceat(norms, self._row_starts), _MIN_ROW_NORM)
-            self._row_norm = self._norm[self._row_owner]
+            G, h = self._G, self._h
+            for rows, limit in self._row_limits:
+                G[rows], h[rows] = limit.compute_qp_inequalities(state)
+            G *= self._scale
+            norms = np.einsum("ij,ij->i", G, G)
+            np.sqrt(norms, out=norms)
+            norm = np.maximum.reduceat(norms, self._row_starts)
+            self._norm = np.maximum(norm, _MIN_ROW_NORM, out=norm)
+            self._row_norm = norm[self._row_owner]
 
     def problem(self, state: FilterState, dq_nominal: np.ndarray) -> qpsolvers.Problem:
         """The filter's QP for this tick as an inspectable ``qpsolvers.Problem`` (merged bounds as lb/ub)."""
@@ -270,34 +277,34 @@ class SafetyFilter:
     ) -> tuple[LimitReport, ...]:
         """Per limit: active at ``dq``, violated by the nominal, and by how much; raise on a hard violation."""
         tolerance = 1e3 * self.hard_tolerance
-        lower, upper = self._bound_lower, self._bound_upper
-        worst = np.maximum(dq - upper, lower - dq).max(axis=1)
-        nominal_worst = np.maximum(dq_nominal - upper, lower - dq_nominal).max(axis=1)
-        if float(worst.max(initial=-np.inf)) > self.hard_tolerance:
+        # Row 0 for the filtered step, row 1 for the nominal one, both at once.
+        pair = self._pair
+        pair[0, 0] = dq
+        pair[1, 0] = dq_nominal
+        worst = np.maximum(pair - self._bound_upper, self._bound_lower - pair).max(axis=2)
+        if self._n_bound and float(worst[0].max()) > self.hard_tolerance:
             raise InfeasibleProblemError("safety_filter", "a joint bound is violated after the clip")
         slack = self._no_slack
         if self.m_rows:
-            excess = self._G @ z - self._h
+            excess = self._excess
+            np.matmul(self._G, z, out=excess[0])
+            np.matmul(self._G, z_nominal, out=excess[1])
+            excess -= self._h
             if self._any_hard_row:
-                hard = float(excess[self._hard_row].max())
+                hard = float(excess[0][self._hard_row].max())
                 if hard > self.hard_tolerance:
                     raise InfeasibleProblemError("safety_filter", f"hard limit violated by {hard:.3g} after the solve")
-            worst = np.concatenate((worst, np.maximum.reduceat(excess, self._row_starts)))
-            nominal_excess = self._G @ z_nominal - self._h
-            nominal_worst = np.concatenate((nominal_worst, np.maximum.reduceat(nominal_excess, self._row_starts)))
+            worst = np.concatenate((worst, np.maximum.reduceat(excess, self._row_starts, axis=1)), axis=1)
             if self.n_slack and sigma.any():
                 slack = np.zeros(len(self.limits))
                 slack[self._soft] = sigma * self._norm[self._soft_of_rowed]
         # Back from (bound limits, then the others) to the caller's order.
-        active = (worst[self._report_order] >= -tolerance).tolist()
-        nominal_worst = nominal_worst[self._report_order]
+        worst = worst[:, self._report_order]
+        active = (worst[0] >= -tolerance).tolist()
+        nominal_worst = worst[1]
         intervened = (nominal_worst > tolerance).tolist()
         violation = np.maximum(nominal_worst, 0.0).tolist()
-        slack_values = slack.tolist()
-        return tuple(
-            LimitReport(name, active[i], intervened[i], violation[i], slack_values[i])
-            for i, name in enumerate(self._names)
-        )
+        return tuple(map(LimitReport, self._names, active, intervened, violation, slack.tolist()))
 
     # -- solvers ------------------------------------------------------------------------------------
 
