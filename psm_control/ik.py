@@ -18,6 +18,7 @@ updated in place each call, unless the unconstrained minimiser already satisfies
 
 from __future__ import annotations
 
+import importlib
 import math
 import warnings
 from typing import Any, NamedTuple
@@ -35,6 +36,10 @@ __all__ = ["DifferentialIk", "IkResult", "KeptOsqp"]
 
 _SOLVED = ("solved", "solved inaccurate")
 _INFINITY = 1e30  # OSQP_INFTY: bounds beyond it are infinite
+# np.linalg.solve's own kernel: the same LAPACK call and result, without the wrapper's type checks and
+# error-state context (a third of the IK's Python time). A 6x6 damped Gram matrix is never singular; a
+# non-finite result goes through np.linalg.solve itself, which raises or returns exactly as it always did.
+_SOLVE1: Any = getattr(importlib.import_module("numpy.linalg._umath_linalg"), "solve1", None) or np.linalg.solve
 _STATUS = {int(v): k.removeprefix("OSQP_").lower().replace("_", " ") for k, v in osqp.SolverStatus.__members__.items()}
 
 
@@ -219,7 +224,10 @@ class DifferentialIk:
         """
         J = configuration.local_jacobian()
         error = self.errors(configuration, goal_local)
-        P, q = self._cost(J, error)
+        JW = J.T * self.weights
+        P = JW @ J
+        P += self._damping
+        b = JW @ error  # the cost's linear term is -b
         lower = np.asarray(lower, dtype=float)
         upper = np.asarray(upper, dtype=float)
         if np.count_nonzero(lower <= upper) != self.dof:
@@ -234,16 +242,18 @@ class DifferentialIk:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 solution = qpsolvers.solve_problem(
-                    qpsolvers.Problem(P, q, lb=lower, ub=upper), solver="osqp", **settings
+                    qpsolvers.Problem(P, -b, lb=lower, ub=upper), solver="osqp", **settings
                 )
             dq, status = solution.x, str(solution.extras["info"].status)
         else:
             # A convex QP's unconstrained minimiser is its solution when it satisfies the bounds: the
             # common case of a small step, solved by one 6x6 linear solve instead of an ADMM run.
-            dq = np.linalg.solve(P, -q)
+            dq = _SOLVE1(P, b)
+            if not math.isfinite(dq @ dq):
+                dq = np.linalg.solve(P, b)
             if np.count_nonzero((dq < lower) | (dq > upper)):
                 dq, _, status, _ = self._qp.solve(
-                    q, np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY), Px=P[self._Px_index]
+                    -b, np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY), Px=P[self._Px_index]
                 )
         if dq is None or status not in _SOLVED or np.count_nonzero(np.isfinite(dq)) != self.dof:
             raise InfeasibleProblemError("ik", status, self.problem(configuration, goal_local, lower, upper))

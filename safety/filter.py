@@ -165,7 +165,13 @@ class SafetyFilter:
         self._n_bound = len(self._bound)
         self._pair = np.zeros((2, 1, dof))  # [dq, dq_nominal], broadcast against the (bound limits, dof) bounds
         self._excess = np.zeros((2, self.m_rows))  # [G z - h, G z_nominal - h]
-        self._row_starts_list = self._row_starts.tolist()
+        self._rows = np.zeros((self.m_rows, dof))
+        self._q_z = self._q[:dof]
+        self._hard_l_z = self._hard_l[:dof]
+        self._hard_u_z = self._hard_u[:dof]
+        self._hard_u_rows = self._hard_u[dof:]
+        self._zero_slack = np.zeros(self.n_slack)
+        self._zero_slack.flags.writeable = False
 
     def reset(self) -> None:
         """Forget solver state carried between solves, so a new episode starts from the same state."""
@@ -257,7 +263,7 @@ class SafetyFilter:
         self._stack(state)
         z_nominal = dq_nominal / self._scale
         z = np.minimum(np.maximum(z_nominal, self._lb), self._ub)
-        sigma = np.zeros(self.n_slack)
+        sigma = self._zero_slack
         solved = False
         self._iterations = 0
         if self.naive or (self.m_rows and np.count_nonzero(self._G @ z > self._h)):
@@ -310,21 +316,23 @@ class SafetyFilter:
 
     def _solve(self, z_nominal: np.ndarray) -> tuple[np.ndarray | None, str]:
         """Solve this tick's QP: without slack first, with it only when that does not settle it."""
-        rows = self._G / self._row_norm[:, None]
-        h = self._h / self._row_norm
+        row_norm = self._row_norm
+        rows = np.divide(self._G, row_norm[:, None], out=self._rows)
+        h = self._h / row_norm
         # A row no displacement within the bounds can violate is left out (u = inf): same solution,
         # fewer active candidates for the solver.
-        reach = np.abs(rows) @ np.maximum(np.abs(self._lb), np.abs(self._ub))
+        lb, ub = self._lb, self._ub
+        reach = np.abs(rows) @ np.maximum(np.abs(lb), np.abs(ub))
         u_rows = np.where(reach > h, np.minimum(h, _INFINITY), _INFINITY)
-        lb = np.maximum(self._lb, -_INFINITY)
-        ub = np.minimum(self._ub, _INFINITY)
-        self._q[: self.dof] = -z_nominal
+        lb = np.maximum(lb, -_INFINITY)
+        ub = np.minimum(ub, _INFINITY)
+        np.negative(z_nominal, out=self._q_z)
         # If the rows can all be met and no soft row's multiplier exceeds its penalty, the slack-free
         # solution is exactly the penalised problem's (slack zero), and ADMM converges fast on it.
         x, y_rows, status, iterations = self._stage(False, lb, ub, rows, u_rows)
         self._iterations = iterations
         if status in _SOLVED and x is not None and not np.count_nonzero(y_rows > self._row_penalty):
-            return np.concatenate([x, np.zeros(self.n_slack)]), status
+            return np.concatenate([x, self._zero_slack]), status
         x, _, status, iterations = self._stage(True, lb, ub, rows, u_rows)
         self._iterations += iterations
         return x, status
@@ -333,17 +341,16 @@ class SafetyFilter:
         self, slack: bool, lb: np.ndarray, ub: np.ndarray, rows: np.ndarray, u_rows: np.ndarray
     ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
         """One QP: ``(x, row multipliers, status, iterations)``, kept workspace or rebuilt (naive)."""
-        dof = self.dof
         if self.naive:
             return self._stage_naive(slack, lb, ub, rows, u_rows)
         if not slack:
-            self._hard_l[:dof] = lb
-            self._hard_u[:dof] = ub
-            self._hard_u[dof:] = u_rows
+            self._hard_l_z[:] = lb
+            self._hard_u_z[:] = ub
+            self._hard_u_rows[:] = u_rows
             self._hard_Ax[self._hard_G_pos] = rows.ravel()
-            x, y, status, iterations = self._hard.solve(self._q[:dof], self._hard_l, self._hard_u, Ax=self._hard_Ax)
-            return x, y[dof:], status, iterations
-        first = self._first_row
+            x, y, status, iterations = self._hard.solve(self._q_z, self._hard_l, self._hard_u, Ax=self._hard_Ax)
+            return x, y[self.dof :], status, iterations
+        dof, first = self.dof, self._first_row
         self._l[:dof] = lb
         self._u[:dof] = ub
         self._u[first:] = u_rows

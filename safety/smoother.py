@@ -18,6 +18,7 @@ from psm_control.errors import SafetyStopError
 
 __all__ = ["JointSmoother", "SmootherState"]
 
+_WORKING = Result.Working
 _DUST = 1e-9  # velocity [rad/s, m/s] and acceleration below which a retry treats the joint as at rest
 
 
@@ -78,14 +79,11 @@ class JointSmoother:
 
     def _read_state(self) -> SmootherState:
         # Read-only: the same arrays are the next tick's starting state, so nobody may change them.
-        state = SmootherState(
-            np.array(self._input.current_position),
-            np.array(self._input.current_velocity),
-            np.array(self._input.current_acceleration),
-        )
-        for array in state:
-            array.flags.writeable = False
-        return state
+        # One (3, dof) array; its rows are read-only views.
+        data = self._input
+        rows = np.array((data.current_position, data.current_velocity, data.current_acceleration))
+        rows.flags.writeable = False
+        return SmootherState(rows[0], rows[1], rows[2])
 
     def step_to(self, goal: np.ndarray) -> SmootherState:
         """Advance one period towards ``goal``, where the joints should come to rest.
@@ -118,7 +116,7 @@ class JointSmoother:
                 result = self._ruckig.update(self._input, self._output)
             except (RuntimeError, RuckigError) as e:
                 raise SafetyStopError(f"smoother: Ruckig rejected the input ({str(e).splitlines()[0]})") from e
-        if result not in (Result.Working, Result.Finished):
+        if result is not _WORKING and result not in (Result.Working, Result.Finished):
             raise SafetyStopError(f"smoother: Ruckig returned {result}")
         self._output.pass_to_input(self._input)
         self._state = self._read_state()

@@ -8,6 +8,7 @@ and the stop is recorded. Nothing here uses ``assert``: checks are plain compari
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -71,6 +72,7 @@ class CommandVerifier:
         lower[2] = max(lower[2], self.min_insertion_m)
         self._center = np.concatenate([(lower + self.upper) / 2.0, np.zeros(2 * lower.size)])
         self._half_width = np.concatenate([(self.upper - lower) / 2.0 + tolerance, self.velocity, self.acceleration])
+        self._joints = np.empty(self._center.size)
 
     def set_base_frame(self, transform_rcm_to_base: np.ndarray) -> None:
         """Use a new base frame (4x4 pose of the RCM) for the workspace check."""
@@ -93,13 +95,18 @@ class CommandVerifier:
         """Return what is wrong with ``command`` ("" if nothing)."""
         q, qd, qdd = command.q, command.qd, command.qdd
         try:
-            joints_ok = (
-                np.count_nonzero(np.abs(np.concatenate((q, qd, qdd)) - self._center) <= self._half_width)
-                == self._center.size
-            )
-        except ValueError:  # wrong shapes: the detailed checks say which
+            joints = self._joints
+            np.concatenate((q, qd, qdd), out=joints)
+            joints -= self._center
+            np.abs(joints, out=joints)
+            joints_ok = np.count_nonzero(joints <= self._half_width) == self._center.size
+        except (ValueError, TypeError):  # wrong shapes or types: the detailed checks say which
             joints_ok = False
-        if joints_ok and np.isfinite(command.jaw):
+        try:
+            jaw_ok = math.isfinite(command.jaw)
+        except (TypeError, ValueError):
+            jaw_ok = False
+        if joints_ok and jaw_ok:
             return self._workspace_problem(q)
         for name, vector in (("q", q), ("qd", qd), ("qdd", qdd)):
             if vector.shape != self.lower.shape or not np.all(np.isfinite(vector)):
@@ -129,7 +136,9 @@ class CommandVerifier:
         pin.forwardKinematics(self._model, self._data, self._q_full)
         tip = self._rotation @ pin.updateFramePlacement(self._model, self._data, self._tip).translation
         tip += self._translation
-        if np.count_nonzero(np.abs(tip - self._box_center) <= self._box_half) == 3:
+        offset = tip - self._box_center
+        np.abs(offset, out=offset)
+        if np.count_nonzero(offset <= self._box_half) == 3:
             return ""
         outside = (tip < self.box_lower) | (tip > self.box_upper)
         if np.any(outside):
