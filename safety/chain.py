@@ -143,7 +143,6 @@ class ControlChain:
         self._base_translation = self._command_state.base_frame[:3, 3].copy()
         self._q_center = (self.model.lower + self.model.upper) / 2.0
         self._q_half = (self.model.upper - self.model.lower) / 2.0
-        self._bits = [1 << i for i in range(len(self.limits))]
 
     def set_base_frame(self, transform_rcm_to_base: np.ndarray) -> None:
         """Set the pose of the RCM in the base frame (as the dVRK's ``set_base_frame``)."""
@@ -320,11 +319,8 @@ class ControlChain:
                 return self._stop(f"safety filter: {e}")
             dq = result.dq
             interventions = result.interventions
-            for bit, report in zip(self._bits, result.reports, strict=True):
-                if report.intervened:
-                    intervened |= bit
-                if report.active:
-                    active |= bit
+            intervened = result.intervened_mask
+            active = result.active_mask
         else:
             dq = dq_nominal
         try:

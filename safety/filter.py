@@ -41,27 +41,67 @@ _SOLVED = ("solved", "solved inaccurate")
 _MIN_ROW_NORM = 1e-9
 
 
+class _Reports:
+    """What the reports are made of, turned into :class:`LimitReport` objects only when asked for."""
+
+    __slots__ = ("_active", "_intervened", "_names", "_nominal_worst", "_reports", "_slack")
+
+    def __init__(
+        self,
+        names: tuple[str, ...],
+        active: np.ndarray,
+        intervened: np.ndarray,
+        nominal_worst: np.ndarray,
+        slack: np.ndarray,
+    ) -> None:
+        self._names = names
+        self._active = active
+        self._intervened = intervened
+        self._nominal_worst = nominal_worst
+        self._slack = slack
+        self._reports: tuple[LimitReport, ...] | None = None
+
+    def build(self) -> tuple[LimitReport, ...]:
+        if self._reports is None:
+            self._reports = tuple(
+                map(
+                    LimitReport,
+                    self._names,
+                    self._active.tolist(),
+                    self._intervened.tolist(),
+                    np.maximum(self._nominal_worst, 0.0).tolist(),
+                    self._slack.tolist(),
+                )
+            )
+        return self._reports
+
+
 class FilterResult(NamedTuple):
     """One tick of the safety filter.
 
     Attributes:
         dq: The safe displacement (6,).
-        reports: One report per limit, in the filter's order.
         solved: Whether a QP was solved (False: the nominal command was already safe).
         change: ``||dq - dq_nom||`` in the filter's normalised joint metric.
         iterations: OSQP iterations of this tick's solve (0 without a solve).
+        active_mask: Bit ``i`` set when limit ``i`` (the filter's order) was active at ``dq``.
+        intervened_mask: Bit ``i`` set when the nominal command violated limit ``i``.
+        interventions: Names of the limits the nominal command violated.
     """
 
     dq: np.ndarray
-    reports: tuple[LimitReport, ...]
     solved: bool
     change: float
-    iterations: int = 0
+    iterations: int
+    active_mask: int
+    intervened_mask: int
+    interventions: tuple[str, ...]
+    detail: _Reports
 
     @property
-    def interventions(self) -> tuple[str, ...]:
-        """Names of the limits the nominal command violated."""
-        return tuple(r.name for r in self.reports if r.intervened)
+    def reports(self) -> tuple[LimitReport, ...]:
+        """One report per limit, in the filter's order (built on first access)."""
+        return self.detail.build()
 
 
 class SafetyFilter:
@@ -156,7 +196,7 @@ class SafetyFilter:
         self._hard = KeptOsqp(sparse.identity(dof, format="csc"), hard_pattern, self._settings)
         self._slack = KeptOsqp(sparse.diags(self._P_diag, format="csc"), self._A_pattern, self._settings)
         self._iterations = 0
-        self._names = [limit.name for limit in self.limits]
+        self._names = tuple(limit.name for limit in self.limits)
         self._report_order = np.argsort(np.array(self._bound + self._rowed, dtype=np.intp))
         self._any_hard_row = bool(self._hard_row.any())
         self._no_slack = np.zeros(len(self.limits))
@@ -166,6 +206,9 @@ class SafetyFilter:
         self._pair = np.zeros((2, 1, dof))  # [dq, dq_nominal], broadcast against the (bound limits, dof) bounds
         self._excess = np.zeros((2, self.m_rows))  # [G z - h, G z_nominal - h]
         self._rows = np.zeros((self.m_rows, dof))
+        # Bit of each column of the (bound limits, then the others) order: limit i is bit i.
+        self._bit_values = np.array([1 << i for i in self._bound + self._rowed], dtype=np.int64)
+        self._mask_names: dict[int, tuple[str, ...]] = {}
         self._q_z = self._q[:dof]
         self._hard_l_z = self._hard_l[:dof]
         self._hard_u_z = self._hard_u[:dof]
@@ -274,14 +317,33 @@ class SafetyFilter:
             sigma = np.maximum(x[self.dof :], 0.0)
             solved = True
         dq = z * self._scale
-        reports = self._reports(dq_nominal, dq, z_nominal, z, sigma)
+        active, intervened, detail = self._reports(dq_nominal, dq, z_nominal, z, sigma)
         change = z - z_nominal
-        return FilterResult(dq, reports, solved, math.sqrt(float(change @ change)), self._iterations)
+        return FilterResult(
+            dq,
+            solved,
+            math.sqrt(float(change @ change)),
+            self._iterations,
+            active,
+            intervened,
+            self._interventions(intervened),
+            detail,
+        )
+
+    def _interventions(self, mask: int) -> tuple[str, ...]:
+        names = self._mask_names.get(mask)
+        if names is None:
+            names = tuple(name for i, name in enumerate(self._names) if mask >> i & 1)
+            self._mask_names[mask] = names
+        return names
 
     def _reports(
         self, dq_nominal: np.ndarray, dq: np.ndarray, z_nominal: np.ndarray, z: np.ndarray, sigma: np.ndarray
-    ) -> tuple[LimitReport, ...]:
-        """Per limit: active at ``dq``, violated by the nominal, and by how much; raise on a hard violation."""
+    ) -> tuple[int, int, _Reports]:
+        """Per limit: active at ``dq``, violated by the nominal, and by how much; raise on a hard violation.
+
+        Returns the active and intervened bit masks (limit ``i`` is bit ``i``) and the reports' data.
+        """
         tolerance = 1e3 * self.hard_tolerance
         # Row 0 for the filtered step, row 1 for the nominal one, both at once.
         pair = self._pair
@@ -304,13 +366,12 @@ class SafetyFilter:
             if self.n_slack and sigma.any():
                 slack = np.zeros(len(self.limits))
                 slack[self._soft] = sigma * self._norm[self._soft_of_rowed]
-        # Back from (bound limits, then the others) to the caller's order.
-        worst = worst[:, self._report_order]
-        active = (worst[0] >= -tolerance).tolist()
-        nominal_worst = worst[1]
-        intervened = (nominal_worst > tolerance).tolist()
-        violation = np.maximum(nominal_worst, 0.0).tolist()
-        return tuple(map(LimitReport, self._names, active, intervened, violation, slack.tolist()))
+        # Columns are (bound limits, then the others); the bits and the reports are in the caller's order.
+        active = worst[0] >= -tolerance
+        intervened = worst[1] > tolerance
+        order = self._report_order
+        detail = _Reports(self._names, active[order], intervened[order], worst[1][order], slack)
+        return int(active @ self._bit_values), int(intervened @ self._bit_values), detail
 
     # -- solvers ------------------------------------------------------------------------------------
 

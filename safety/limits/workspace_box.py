@@ -39,8 +39,10 @@ class WorkspaceBoxLimit(Limit):
         """Rows ``J dq <= gamma (hi - x)`` and ``-J dq <= gamma (x - lo)``."""
         J = state.tool_jacobian
         x = state.tool_position_m
-        self._G[:3] = J
-        self._G[3:] = -J
-        self._h[:3] = self.gamma * (self.upper_m - x)
-        self._h[3:] = self.gamma * (x - self.lower_m)
-        return self._G, self._h
+        G, h = self._G, self._h
+        G[:3] = J
+        np.negative(J, out=G[3:])
+        np.subtract(self.upper_m, x, out=h[:3])
+        np.subtract(x, self.lower_m, out=h[3:])
+        h *= self.gamma
+        return G, h
