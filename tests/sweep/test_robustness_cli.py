@@ -49,3 +49,16 @@ def test_unknown_parameter_is_refused_with_valid_names(tmp_path: Path) -> None:
     assert result.returncode == 1
     assert "stiffness" in result.stderr and "tissue_size_m" in result.stderr
     assert not (tmp_path / "episodes.jsonl").exists()
+
+
+def test_simulation_sweep_is_identical_on_local_and_ray(tmp_path: Path) -> None:
+    """The same robustness sweep of the real simulation gives identical episode records on both backends."""
+    records = {}
+    for backend in ("local", "ray"):
+        out = tmp_path / backend
+        result = run_cli(*SWEEP, "--vary", "stiffness=0.3:3x,latency=0:2", "--backend", backend, "--out", str(out))
+        assert result.returncode == 0, result.stderr
+        lines = (out / "episodes.jsonl").read_text().splitlines()
+        records[backend] = sorted(lines, key=lambda line: json.loads(line)["index"])
+    assert len(records["local"]) == 4
+    assert records["local"] == records["ray"]
