@@ -1,0 +1,167 @@
+"""Cross-check of our DDPG+HER against Stable-Baselines3's DDPG+HER on Task I (``TissueRetract-Lift-v0``).
+
+SB3's ``DDPG`` with a ``HerReplayBuffer`` is trained with settings matched to our defaults (the seed
+paper's) as far as SB3 allows, for the same number of training episodes, and its deterministic actor
+is then scored by *our* evaluation (:func:`sim.evaluation.run_episode` on seeds ``S * 100000 + i``, as
+``tissue-retract evaluate --seeds S`` does), so both learners pass through the same full safety chain.
+
+Matched: 3 x 128 ReLU actor and critic, gamma 0.99, learning rate 1e-3, tau 0.005, batch 128, buffer
+100k, 1,000 uniformly random seed steps, 40 gradient steps after each episode, Gaussian action noise
+0.1, HER ``future`` with k = 4 (relabel probability 0.8 in both).
+Not matched, because SB3's DDPG has no such option: our running normalisation of observations and goals
+(clip 5), our clipping of the target Q to [-1/(1-gamma), 0] and our actor's action penalty mean(a^2).
+No ``VecNormalize`` is added: SB3 sees the raw observations.
+
+Run as ``python -m policies.crosscheck --episodes 300 --seed 1 --out runs/crosscheck/sb3``. Needs the
+``dev`` extra (``pip install -e .[dev]``), which brings stable-baselines3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psm_control.errors import ConfigurationError
+
+__all__ = ["TASK_ID", "crosscheck_sb3", "main"]
+
+TASK_ID = "TissueRetract-Lift-v0"
+
+
+def crosscheck_sb3(
+    episodes: int = 300,
+    seed: int = 1,
+    eval_episodes: int = 50,
+    eval_seed: int = 1,
+    learning_starts: int = 1000,
+    gradient_steps: int = 40,
+    out: str | Path | None = None,
+) -> dict[str, Any]:
+    """Train SB3 DDPG+HER on Task I for ``episodes`` episodes and evaluate it with our evaluation.
+
+    Args:
+        episodes: Training episodes (the budget; 50 env steps each unless an episode ends early).
+        seed: Seed of SB3's model (torch, NumPy, action space) and of its training env.
+        eval_episodes: Evaluation episodes, on seeds ``eval_seed * 100000 + i``.
+        eval_seed: Evaluation seed, as ``tissue-retract evaluate --seeds``.
+        learning_starts: Uniformly random env steps before learning (1,000 = ours).
+        gradient_steps: Gradient steps after each episode (40 = ours).
+        out: If given, the SB3 model (``sb3_ddpg_her.zip``) and ``result.json`` are written there.
+
+    Returns:
+        ``successes``, ``eval_episodes``, ``success_rate``, ``ci95`` (Wilson, low/high),
+        ``train_episodes``, ``env_steps``, ``train_wall_s``, ``env_steps_per_s`` (training, including
+        updates), ``eval_wall_s``, ``seed``, ``eval_seed`` and ``settings``.
+
+    Raises:
+        ConfigurationError: A count is not positive, or stable-baselines3 is not installed.
+    """
+    for name, value in (("episodes", episodes), ("eval_episodes", eval_episodes)):
+        if value < 1:
+            raise ConfigurationError(name, value, "a positive number of episodes")
+    try:
+        from stable_baselines3 import DDPG, HerReplayBuffer
+        from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+        from stable_baselines3.common.noise import NormalActionNoise
+    except ImportError as e:
+        raise ConfigurationError(
+            "stable_baselines3", None, "stable-baselines3 installed: pip install -e .[dev] (the dev extra)"
+        ) from e
+    import sim.envs
+    from sim.envs import MAX_EPISODE_STEPS
+    from sim.evaluation import run_episode
+    from sim.sweep import wilson_interval
+
+    settings: dict[str, Any] = dict(
+        learning_rate=1e-3,
+        buffer_size=100_000,
+        learning_starts=learning_starts,
+        batch_size=128,
+        tau=0.005,
+        gamma=0.99,
+        train_freq=(1, "episode"),
+        gradient_steps=gradient_steps,
+        replay_buffer_kwargs=dict(goal_selection_strategy="future", n_sampled_goal=4),
+        policy_kwargs=dict(net_arch=dict(pi=[128, 128, 128], qf=[128, 128, 128])),
+        action_noise_sigma=0.1,
+    )
+    env = sim.envs.make(TASK_ID)
+    action_dim = int(env.action_space.shape[0])
+    sb3_kwargs = {k: v for k, v in settings.items() if k != "action_noise_sigma"}
+    noise = NormalActionNoise(np.zeros(action_dim), settings["action_noise_sigma"] * np.ones(action_dim))
+    model = DDPG(
+        "MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, action_noise=noise, seed=seed, **sb3_kwargs
+    )
+    start = time.perf_counter()
+    model.learn(total_timesteps=episodes * MAX_EPISODE_STEPS, callback=StopTrainingOnMaxEpisodes(episodes, verbose=0))
+    train_wall_s = time.perf_counter() - start
+    env.close()
+
+    eval_env = sim.envs.make(TASK_ID)
+    try:
+
+        def policy(observation: dict[str, np.ndarray]) -> np.ndarray:
+            action, _ = model.predict(observation, deterministic=True)
+            return np.asarray(action)
+
+        start = time.perf_counter()
+        seeds = [eval_seed * 100000 + i for i in range(eval_episodes)]
+        results = [run_episode(eval_env, policy, lambda: None, s) for s in seeds]
+        eval_wall_s = time.perf_counter() - start
+    finally:
+        eval_env.close()
+    successes = sum(r.success for r in results)
+    result: dict[str, Any] = {
+        "successes": successes,
+        "eval_episodes": eval_episodes,
+        "success_rate": successes / eval_episodes,
+        "ci95": list(wilson_interval(successes, eval_episodes)),
+        "train_episodes": episodes,
+        "env_steps": int(model.num_timesteps),
+        "train_wall_s": train_wall_s,
+        "env_steps_per_s": model.num_timesteps / train_wall_s,
+        "eval_wall_s": eval_wall_s,
+        "seed": seed,
+        "eval_seed": eval_seed,
+        "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in settings.items()},
+    }
+    if out is not None:
+        directory = Path(out)
+        directory.mkdir(parents=True, exist_ok=True)
+        model.save(directory / "sb3_ddpg_her.zip")
+        (directory / "result.json").write_text(json.dumps(result, indent=2))
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: train and evaluate SB3 DDPG+HER on Task I and print a table."""
+    parser = argparse.ArgumentParser(prog="python -m policies.crosscheck", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--episodes", type=int, default=300, help="training episodes (default: 300)")
+    parser.add_argument("--seed", type=int, default=1, help="training seed (default: 1)")
+    parser.add_argument("--eval-episodes", type=int, default=50, help="evaluation episodes (default: 50)")
+    parser.add_argument("--eval-seed", type=int, default=1, help="evaluation seed (default: 1)")
+    parser.add_argument("--out", default=None, help="directory for the SB3 model and result.json")
+    args = parser.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(1)
+    r = crosscheck_sb3(args.episodes, args.seed, args.eval_episodes, args.eval_seed, out=args.out)
+    low, high = r["ci95"]
+    print(f"SB3 DDPG+HER on {TASK_ID}, seed {r['seed']}, {r['train_episodes']} training episodes")
+    print(f"{'metric':<28}{'value':>22}")
+    print(f"{'success (eval)':<28}{r['successes']:>10}/{r['eval_episodes']} = {r['success_rate']:.2f}")
+    print(f"{'95 % Wilson interval':<28}{f'[{low:.2f}, {high:.2f}]':>22}")
+    print(f"{'env steps (training)':<28}{r['env_steps']:>22}")
+    print(f"{'training wall time [s]':<28}{r['train_wall_s']:>22.1f}")
+    print(f"{'env steps/s (with updates)':<28}{r['env_steps_per_s']:>22.1f}")
+    print(f"{'evaluation wall time [s]':<28}{r['eval_wall_s']:>22.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
