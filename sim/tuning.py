@@ -76,9 +76,7 @@ def _integers(setting: Mapping[str, float]) -> dict[str, Any]:
     """Grid values as the config wants them: integer settings (solver_max_iter) rounded."""
     default = SafetyConfig()
     return {
-        k: round(v)
-        if isinstance(getattr(default, k), int) and not isinstance(getattr(default, k), bool)
-        else float(v)
+        k: round(v) if isinstance(getattr(default, k), int) and not isinstance(getattr(default, k), bool) else float(v)
         for k, v in setting.items()
     }
 
