@@ -10,7 +10,8 @@ Matched: 3 x 128 ReLU actor and critic, gamma 0.99, learning rate 1e-3, tau 0.00
 0.1, HER ``future`` with k = 4 (relabel probability 0.8 in both).
 Not matched, because SB3's DDPG has no such option: our running normalisation of observations and goals
 (clip 5), our clipping of the target Q to [-1/(1-gamma), 0] and our actor's action penalty mean(a^2).
-No ``VecNormalize`` is added: SB3 sees the raw observations.
+No ``VecNormalize`` is added: SB3 sees the raw observations. SB3's ``MultiInputPolicy`` also feeds the
+networks all three dict entries (``achieved_goal`` too); ours feeds ``observation`` and ``desired_goal``.
 
 Run as ``python -m policies.crosscheck --episodes 300 --seed 1 --out runs/crosscheck/sb3``. Needs the
 ``dev`` extra (``pip install -e .[dev]``), which brings stable-baselines3.
