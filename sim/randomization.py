@@ -13,7 +13,7 @@ import numpy as np
 
 from psm_control.errors import ConfigurationError, UnknownVariantError
 
-__all__ = ["DEFAULT_RANGES", "INTEGER_PARAMETERS", "Randomizer"]
+__all__ = ["DEFAULT_RANGES", "INTEGER_PARAMETERS", "RENDER_PARAMETERS", "Randomizer"]
 
 #: Default ranges (low, high), SI units. Colours are RGB in [0, 1].
 DEFAULT_RANGES: dict[str, tuple[float, float]] = {
@@ -24,6 +24,7 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "tissue_color_r": (0.7, 0.95),
     "tissue_color_g": (0.3, 0.5),
     "tissue_color_b": (0.3, 0.5),
+    "tissue_texture_seed": (0.0, 9999.0),
     "tissue_x_m": (-0.01, 0.01),
     "tissue_y_m": (-0.01, 0.01),
     "site_offset_x_m": (-0.003, 0.003),
@@ -38,7 +39,10 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
 }
 
 #: Parameters drawn as integers (inclusive range).
-INTEGER_PARAMETERS = frozenset({"action_latency_steps"})
+INTEGER_PARAMETERS = frozenset({"action_latency_steps", "tissue_texture_seed"})
+
+#: Parameters that change only what the camera sees (see the module's note on their stream).
+RENDER_PARAMETERS = frozenset({"tissue_texture_seed"})
 
 
 class Randomizer:
@@ -71,12 +75,15 @@ class Randomizer:
         fixed = dict(fixed or {})
         for name in fixed:
             self.check_name(name)
+        jump = getattr(rng.bit_generator, "jumped", None)
+        render_rng = np.random.Generator(jump()) if jump is not None else rng
         values: dict[str, float] = {}
         for name, (low, high) in self.ranges.items():
+            source = render_rng if name in RENDER_PARAMETERS else rng
             if name in INTEGER_PARAMETERS:
-                drawn = float(rng.integers(int(low), int(high) + 1))
+                drawn = float(source.integers(int(low), int(high) + 1))
             else:
-                drawn = float(rng.uniform(low, high))
+                drawn = float(source.uniform(low, high))
             value = float(fixed.get(name, drawn))
             if not np.isfinite(value):
                 raise ConfigurationError(name, value, "a finite number")

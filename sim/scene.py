@@ -86,7 +86,7 @@ class Scene:
         values: The episode's randomization values (see :mod:`sim.randomization`).
         physics: Physics stepping.
         grasp: Grasp settings (the friction is taken from ``values``).
-        tissue: Base tissue settings (stiffness, damping, mass, size, colour from ``values``).
+        tissue: Base tissue settings (stiffness, damping, mass, size, colour, texture from ``values``).
     """
 
     def __init__(
@@ -123,6 +123,7 @@ class Scene:
             damping=values["tissue_damping"],
             friction=tissue.friction,
             rgba=(values["tissue_color_r"], values["tissue_color_g"], values["tissue_color_b"], 1.0),
+            texture_seed=int(values["tissue_texture_seed"]),
             site_inset_m=tissue.site_inset_m,
             site_spacing_m=tissue.site_spacing_m,
         )

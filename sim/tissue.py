@@ -9,13 +9,23 @@ heavier nodes is both faster and more stable than the 15 x 15 cloth of the paper
 
 Layout in the tissue's own frame: the flap spans ``[-L/2, L/2]^2`` in x and y; the edges at
 ``y = -L/2`` (back) and ``x = +-L/2`` (sides) are pinned, the edge at ``y = +L/2`` is the free flap.
+
+The flap's look is its colour times a procedural texture (seeded blotches and vessel-like streaks, see
+:func:`texture_image`). The mesh carries texture coordinates, which do not change the simulation: the
+nodes move bit for bit as without them (measured), and PyBullet's CPU renderer maps the texture onto
+the deforming cloth.
 """
 
 from __future__ import annotations
 
-import functools
+import atexit
+import collections
 import os
+import shutil
+import struct
 import tempfile
+import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +33,7 @@ import pybullet as p
 
 from psm_control.errors import ConfigurationError
 
-__all__ = ["SITE_NAMES", "Tissue", "TissueParams", "grid_mesh"]
+__all__ = ["SITE_NAMES", "Tissue", "TissueParams", "grid_mesh", "texture_file", "texture_image"]
 
 #: Grasp sites along the free edge, as in the paper's Task III.
 SITE_NAMES = ("centre", "left", "right")
@@ -40,7 +50,9 @@ class TissueParams:
         stiffness_n_per_m: Elastic stiffness of every spring [N/m].
         damping: Spring damping stiffness [N s/m].
         friction: Contact friction of the flap against rigid bodies.
-        rgba: Display colour.
+        rgba: Display colour (multiplies the texture).
+        texture_seed: Seed of the procedural texture (:func:`texture_image`); ``None`` draws the flap
+            in the flat colour. Only the rendering depends on it.
         site_inset_m: Distance of the grasp sites in from the free edge [m].
         site_spacing_m: Distance of the left/right sites from the centre site [m].
     """
@@ -52,6 +64,7 @@ class TissueParams:
     damping: float = 0.05
     friction: float = 0.5
     rgba: tuple[float, float, float, float] = (0.85, 0.42, 0.42, 1.0)
+    texture_seed: int | None = None
     site_inset_m: float = 0.004
     site_spacing_m: float = 0.022
 
@@ -79,15 +92,115 @@ def grid_mesh(resolution: int, size_m: float) -> tuple[np.ndarray, np.ndarray]:
     return vertices, np.array(triangles, dtype=int)
 
 
-@functools.lru_cache(maxsize=32)
+#: Side of the square texture images [px].
+TEXTURE_SIZE_PX = 64
+_CACHE_SIZE = 64  # files (textures and meshes) kept per process
+
+
+def _smooth_noise(rng: np.random.Generator, cells: int, size: int) -> np.ndarray:
+    """A (size, size) field in [0, 1]: a random (cells + 1)^2 grid, bilinearly interpolated."""
+    grid = rng.random((cells + 1, cells + 1))
+    coords = np.linspace(0.0, cells, size)
+    i0 = np.minimum(coords.astype(int), cells - 1)
+    t = coords - i0
+    rows = grid[i0] * (1.0 - t)[:, None] + grid[i0 + 1] * t[:, None]
+    return np.asarray(rows[:, i0] * (1.0 - t)[None, :] + rows[:, i0 + 1] * t[None, :])
+
+
+def texture_image(seed: int, size: int = TEXTURE_SIZE_PX) -> np.ndarray:
+    """The flap's procedural texture for ``seed``: (size, size, 3) uint8, to be multiplied by its colour.
+
+    Blotches (two octaves of smooth noise) darken the surface by up to about 30 %; vessel-like streaks
+    (a thin band around a level set of a third noise field, so they meander and branch) darken green
+    and blue more than red, so on a pink flap they read as dark red vessels. The same seed always
+    gives the same image.
+    """
+    rng = np.random.default_rng([int(seed), 0x7E57])
+    blotches = 0.6 * _smooth_noise(rng, 4, size) + 0.4 * _smooth_noise(rng, 9, size)
+    shade = 1.0 - 0.3 * blotches
+    level = _smooth_noise(rng, 5, size)
+    width = 0.02 + 0.015 * rng.random()
+    vessels = np.exp(-(((level - rng.uniform(0.35, 0.65)) / width) ** 2))
+    darkening = np.array([0.3, 0.6, 0.5])
+    image = shade[:, :, None] * (1.0 - vessels[:, :, None] * darkening)
+    return np.asarray(np.clip(np.rint(255.0 * image), 0, 255), dtype=np.uint8)
+
+
+def _write_png(path: str, image: np.ndarray) -> None:
+    """Write an (H, W, 3) uint8 image as an 8-bit RGB PNG."""
+    height, width, _ = image.shape
+    raw = b"".join(b"\x00" + image[row].tobytes() for row in range(height))
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    with open(path, "wb") as f:
+        f.write(
+            b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+        )
+
+
+class _Files:
+    """This process's temporary directory for meshes and textures, removed when the process exits.
+
+    Keyed by process id, so that a forked worker (vectorised environments) writes and removes its own.
+    """
+
+    def __init__(self) -> None:
+        self.pid = -1
+        self.directory = ""
+        self.cache: collections.OrderedDict[str, None] = collections.OrderedDict()
+
+    def path(self, name: str) -> str:
+        if self.pid != os.getpid():
+            self.pid = os.getpid()
+            self.directory = tempfile.mkdtemp(prefix="tissue_retract_")
+            self.cache.clear()
+            atexit.register(_remove_directory, self.pid, self.directory)
+        return os.path.join(self.directory, name)
+
+    def get(self, name: str, write: Callable[[str], None]) -> str:
+        """Path of the file ``name``, written by ``write(path)`` unless cached; old files are removed."""
+        path = self.path(name)
+        if name in self.cache:
+            self.cache.move_to_end(name)
+            return path
+        write(path)
+        self.cache[name] = None
+        while len(self.cache) > _CACHE_SIZE:
+            old, _ = self.cache.popitem(last=False)
+            os.remove(self.path(old))
+        return path
+
+
+def _remove_directory(pid: int, directory: str) -> None:
+    if os.getpid() == pid:  # not a forked child's inherited exit handler
+        shutil.rmtree(directory, ignore_errors=True)
+
+
+_FILES = _Files()
+
+
+def texture_file(seed: int) -> str:
+    """Path of the PNG of :func:`texture_image` for ``seed``, written once per process and cached."""
+    seed = int(seed)
+    return _FILES.get(f"texture_{seed}.png", lambda path: _write_png(path, texture_image(seed)))
+
+
 def _obj_file(resolution: int, size_m: float) -> str:
-    vertices, triangles = grid_mesh(resolution, size_m)
-    lines = [f"v {x:.7f} {y:.7f} {z:.7f}" for x, y, z in vertices]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
-    handle, path = tempfile.mkstemp(prefix=f"flap_{resolution}_", suffix=".obj")
-    with os.fdopen(handle, "w") as f:
-        f.write("\n".join(lines) + "\n")
-    return path
+    """Path of the flap's OBJ mesh, with texture coordinates, written once per process and cached."""
+
+    def write(path: str) -> None:
+        vertices, triangles = grid_mesh(resolution, size_m)
+        uv = vertices[:, :2] / size_m + 0.5  # the texture spans the flat flap once
+        lines = [f"v {x:.7f} {y:.7f} {z:.7f}" for x, y, z in vertices]
+        lines += [f"vt {u:.6f} {v:.6f}" for u, v in uv]
+        lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in triangles]
+        with open(path, "w") as f:
+            f.write("\n".join(lines) + "\n")
+
+    return _FILES.get(f"flap_{resolution}_{size_m!r}.obj", write)
 
 
 class Tissue:
@@ -121,7 +234,10 @@ class Tissue:
             collisionMargin=0.001,
             physicsClientId=client,
         )
-        p.changeVisualShape(self.body_id, -1, rgbaColor=list(params.rgba), physicsClientId=client)
+        visual: dict[str, object] = {"rgbaColor": list(params.rgba)}
+        if params.texture_seed is not None:
+            visual["textureUniqueId"] = p.loadTexture(texture_file(params.texture_seed), physicsClientId=client)
+        p.changeVisualShape(self.body_id, -1, physicsClientId=client, **visual)
         pairs = np.concatenate([self.triangles[:, [0, 1]], self.triangles[:, [1, 2]], self.triangles[:, [2, 0]]])
         self.edges = np.unique(np.sort(pairs, axis=1), axis=0)
         self.rest_lengths = np.linalg.norm(vertices[self.edges[:, 1]] - vertices[self.edges[:, 0]], axis=1)
