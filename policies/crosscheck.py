@@ -57,7 +57,8 @@ def crosscheck_sb3(
     Returns:
         ``successes``, ``eval_episodes``, ``success_rate``, ``ci95`` (Wilson, low/high),
         ``train_episodes``, ``env_steps``, ``train_wall_s``, ``env_steps_per_s`` (training, including
-        updates), ``eval_wall_s``, ``seed``, ``eval_seed`` and ``settings``.
+        updates), ``eval_wall_s``, ``failure_classes`` (as ``evaluate``'s JSON), ``seed``, ``eval_seed``
+        and ``settings``.
 
     Raises:
         ConfigurationError: A count is not positive, or stable-baselines3 is not installed.
@@ -75,7 +76,7 @@ def crosscheck_sb3(
         ) from e
     import sim.envs
     from sim.envs import MAX_EPISODE_STEPS
-    from sim.evaluation import run_episode
+    from sim.evaluation import FAILURE_CLASSES, run_episode
     from sim.sweep import wilson_interval
 
     settings: dict[str, Any] = dict(
@@ -127,6 +128,7 @@ def crosscheck_sb3(
         "train_wall_s": train_wall_s,
         "env_steps_per_s": model.num_timesteps / train_wall_s,
         "eval_wall_s": eval_wall_s,
+        "failure_classes": {c: sum(r.failure_class == c for r in results) for c in FAILURE_CLASSES},
         "seed": seed,
         "eval_seed": eval_seed,
         "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in settings.items()},

@@ -22,6 +22,7 @@ KEYS = {
     "train_wall_s",
     "env_steps_per_s",
     "eval_wall_s",
+    "failure_classes",
     "seed",
     "eval_seed",
     "settings",
