@@ -3,17 +3,42 @@
 Every parameter is drawn uniformly from its range at each reset; ``reset(options={name: value})``
 fixes any of them for that episode; ranges are configurable when the environment is made. Unknown
 names raise an error listing the valid ones.
+
+Streams. The parameters are drawn in order from the episode's generator, so a new parameter drawn from
+it would shift every later draw. Parameters that only the camera sees (:data:`RENDER_PARAMETERS`) come
+from a stream jumped once from the episode generator, and the dynamics disturbances
+(:data:`DYNAMICS_PARAMETERS`) from one jumped twice (:meth:`Randomizer.dynamics_stream`); jumping copies
+the bit generator without advancing it, so the same seed gives the same episode whatever these are.
+
+Dynamics disturbances (safe-control-gym style, all 0 by default, and 0 changes nothing):
+
+* ``joint_offset_rad``: encoder calibration error. Each arm joint's measurement is offset by this
+  magnitude times a seeded unit-normal draw (the insertion joint in metres, at 0.01 m per rad); the
+  controller and the observation see the offset joints, the physics the true ones.
+* ``base_error_m``: registration error of the RCM/base in the world. The observation reports the tool
+  pose through a believed base frame translated by a seeded vector of this norm.
+* ``tracking_lag``: in [0, 1); the arm follows its joint set-point with a first-order lag per physics
+  substep, ``q += (1 - lag) * (q_cmd - q)``.
 """
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 
 import numpy as np
 
 from psm_control.errors import ConfigurationError, UnknownVariantError
 
-__all__ = ["DEFAULT_RANGES", "INTEGER_PARAMETERS", "RENDER_PARAMETERS", "Randomizer"]
+__all__ = [
+    "DEFAULT_RANGES",
+    "DYNAMICS_PARAMETERS",
+    "INSERTION_M_PER_RAD",
+    "INTEGER_PARAMETERS",
+    "PARAMETER_LIMITS",
+    "RENDER_PARAMETERS",
+    "Randomizer",
+]
 
 #: Default ranges (low, high), SI units. Colours are RGB in [0, 1].
 DEFAULT_RANGES: dict[str, tuple[float, float]] = {
@@ -36,6 +61,9 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "rcm_z_m": (-0.005, 0.005),
     "observation_noise_m": (0.0, 0.0005),
     "action_latency_steps": (0.0, 1.0),
+    "joint_offset_rad": (0.0, 0.0),
+    "base_error_m": (0.0, 0.0),
+    "tracking_lag": (0.0, 0.0),
 }
 
 #: Parameters drawn as integers (inclusive range).
@@ -43,6 +71,28 @@ INTEGER_PARAMETERS = frozenset({"action_latency_steps", "tissue_texture_seed"})
 
 #: Parameters that change only what the camera sees (see the module's note on their stream).
 RENDER_PARAMETERS = frozenset({"tissue_texture_seed"})
+
+#: Dynamics disturbances, drawn from their own stream (see the module's note).
+DYNAMICS_PARAMETERS = ("joint_offset_rad", "base_error_m", "tracking_lag")
+
+#: Encoder offset of the insertion joint per unit of ``joint_offset_rad`` [m/rad].
+INSERTION_M_PER_RAD = 0.01
+
+#: Allowed values of bounded parameters: (minimum, maximum, maximum included).
+PARAMETER_LIMITS: dict[str, tuple[float, float, bool]] = {
+    "joint_offset_rad": (0.0, np.inf, True),
+    "base_error_m": (0.0, np.inf, True),
+    "tracking_lag": (0.0, 1.0, False),
+}
+
+
+def _check_limits(name: str, value: float) -> None:
+    if name not in PARAMETER_LIMITS:
+        return
+    low, high, closed = PARAMETER_LIMITS[name]
+    if not (value >= low and (value <= high if closed else value < high)):
+        bracket = "]" if closed else ")"
+        raise ConfigurationError(name, value, f"a value in [{low:g}, {high:g}{bracket}")
 
 
 class Randomizer:
@@ -63,6 +113,8 @@ class Randomizer:
             low, high = (float(v) for v in bounds)
             if not (np.isfinite(low) and np.isfinite(high) and low <= high):
                 raise ConfigurationError(name, bounds, "a finite (low, high) range with low <= high")
+            _check_limits(name, low)
+            _check_limits(name, high)
             self.ranges[name] = (low, high)
 
     def check_name(self, name: str) -> None:
@@ -70,16 +122,37 @@ class Randomizer:
         if name not in self.ranges:
             raise UnknownVariantError("randomization parameter", name, sorted(self.ranges))
 
-    def sample(self, rng: np.random.Generator, fixed: Mapping[str, float] | None = None) -> dict[str, float]:
-        """Draw every parameter, keeping the ``fixed`` ones at their given values."""
+    @staticmethod
+    def dynamics_stream(rng: np.random.Generator) -> np.random.Generator:
+        """The dynamics disturbances' stream: ``rng``'s bit generator jumped twice (``rng`` is not advanced)."""
+        jump = getattr(rng.bit_generator, "jumped", None)
+        if jump is not None:
+            return np.random.Generator(jump(2))
+        return copy.deepcopy(rng)
+
+    def sample(
+        self,
+        rng: np.random.Generator,
+        fixed: Mapping[str, float] | None = None,
+        dynamics_rng: np.random.Generator | None = None,
+    ) -> dict[str, float]:
+        """Draw every parameter, keeping the ``fixed`` ones at their given values.
+
+        Args:
+            rng: The episode generator.
+            fixed: Values that replace the draws (they are still drawn, so later draws do not move).
+            dynamics_rng: Stream of the dynamics disturbances; None: :meth:`dynamics_stream` of ``rng``.
+        """
         fixed = dict(fixed or {})
         for name in fixed:
             self.check_name(name)
         jump = getattr(rng.bit_generator, "jumped", None)
         render_rng = np.random.Generator(jump()) if jump is not None else rng
+        dynamics = dynamics_rng if dynamics_rng is not None else self.dynamics_stream(rng)
         values: dict[str, float] = {}
         for name, (low, high) in self.ranges.items():
-            source = render_rng if name in RENDER_PARAMETERS else rng
+            streams = {True: dynamics, False: render_rng if name in RENDER_PARAMETERS else rng}
+            source = streams[name in DYNAMICS_PARAMETERS]
             if name in INTEGER_PARAMETERS:
                 drawn = float(source.integers(int(low), int(high) + 1))
             else:
@@ -87,9 +160,14 @@ class Randomizer:
             value = float(fixed.get(name, drawn))
             if not np.isfinite(value):
                 raise ConfigurationError(name, value, "a finite number")
+            _check_limits(name, value)
             values[name] = value
         return values
 
     def extremes(self, rng: np.random.Generator) -> dict[str, float]:
         """Every parameter at its low or high end, chosen at random (for robustness tests)."""
-        return {name: float(bounds[int(rng.integers(2))]) for name, bounds in self.ranges.items()}
+        dynamics = self.dynamics_stream(rng)
+        return {
+            name: float(bounds[int((dynamics if name in DYNAMICS_PARAMETERS else rng).integers(2))])
+            for name, bounds in self.ranges.items()
+        }

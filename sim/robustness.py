@@ -28,6 +28,8 @@ ALIASES: dict[str, str] = {
     "friction": "grip_friction",
     "obs_noise": "observation_noise_m",
     "latency": "action_latency_steps",
+    "joint_offset": "joint_offset_rad",
+    "base_error": "base_error_m",
 }
 
 #: Disturbances (safe-control-gym style), all sampled per trial. Observation offsets are in metres

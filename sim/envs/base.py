@@ -27,7 +27,7 @@ from sim.control import make_controller
 from sim.exposure import exposed_fraction, surface_samples
 from sim.grasp import GraspParams
 from sim.mechanics import DamageLimits, measure
-from sim.randomization import Randomizer
+from sim.randomization import INSERTION_M_PER_RAD, Randomizer
 from sim.rendering import Camera, Frame, render
 from sim.scene import HIDDEN_HALF_EXTENTS_M, PhysicsParams, Scene
 from sim.tissue import TissueParams
@@ -110,6 +110,8 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.goal = np.zeros(self.goal_size)
         self.controller: ControlChain | None = None
         self.controller_name = ""
+        self._joint_offset: np.ndarray | None = None
+        self._base_error: np.ndarray | None = None
 
     # ----------------------------------------------------------------- task hooks
     def _choose_site(self, rng: np.random.Generator) -> str:
@@ -132,7 +134,11 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         for name in options:
             if name not in self.randomizer.ranges:
                 raise UnknownVariantError("reset option", name, [*self.task_options, *sorted(self.randomizer.ranges)])
-        self.values = self.randomizer.sample(self.np_random, options)
+        # The dynamics disturbances and their directions come from their own stream (jumped, so the
+        # episode generator does not advance and the same seed gives the same episode without them).
+        dynamics_rng = self.randomizer.dynamics_stream(self.np_random)
+        self.values = self.randomizer.sample(self.np_random, options, dynamics_rng)
+        self._joint_offset, self._base_error = self._dynamics_errors(dynamics_rng)
         self.site = str(task.get("site", self._choose_site(self.np_random)))
         cfg = self.config
         self.scene = Scene(self.client, self.model, self.values, cfg.physics, cfg.grasp, cfg.tissue)
@@ -143,7 +149,14 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.scene.tissue.site_local[self.site] + offset
         )
         self.scene.settle()
-        self.backend = SimBackend(self.scene.body, self.scene.configuration.q, cfg.jaw_open_rad)
+        self.backend = SimBackend(
+            self.scene.body,
+            self.scene.configuration.q,
+            cfg.jaw_open_rad,
+            joint_offset=self._joint_offset,
+            tracking_lag=self.values["tracking_lag"],
+            substep_s=cfg.physics.time_step_s,
+        )
         if self.controller is None:  # built once: the chain's QP workspaces outlive episodes
             self.controller, self.controller_name = make_controller(
                 self.scene.configuration,
@@ -194,7 +207,12 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             interventions.update(output.interventions)
             self.backend.servo_jp(output.command)
             count = min(per_tick, cfg.physics.substeps - done)
-            self.scene.step_physics(count)
+            if self.backend.lagging:  # the arm moves during the substeps, so step them one by one
+                for _ in range(count):
+                    self.backend.advance()
+                    self.scene.step_physics(1)
+            else:
+                self.scene.step_physics(count)
             done += count
             measured = self._measured()
         previous = self._nodes
@@ -259,6 +277,25 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         assert self.scene is not None
         return exposed_fraction(self._exposure_points, self._eye, self._nodes, self.scene.tissue.triangles)
 
+    def _dynamics_errors(self, rng: np.random.Generator) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The episode's encoder offset (6,) and base registration error (3,) [m]; None where off.
+
+        Both directions are always drawn from ``rng`` (the dynamics stream), so each stays the same for a
+        seed whatever the other magnitude is.
+        """
+        joint_direction = rng.standard_normal(6)
+        base_direction = rng.standard_normal(3)
+        joint_offset = base_error = None
+        magnitude = self.values["joint_offset_rad"]
+        if magnitude > 0:
+            scale = np.ones(6)
+            scale[2] = INSERTION_M_PER_RAD  # the insertion joint is prismatic [m]
+            joint_offset = magnitude * scale * joint_direction
+        norm = self.values["base_error_m"]
+        if norm > 0:
+            base_error = norm * base_direction / np.linalg.norm(base_direction)
+        return joint_offset, base_error
+
     def _checked_action(self, action: np.ndarray, events: dict[str, Any]) -> np.ndarray:
         raw = np.asarray(action, dtype=float).reshape(-1)
         if raw.shape != (5,) or not np.all(np.isfinite(raw)):
@@ -303,8 +340,17 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     def _observation(self) -> dict[str, np.ndarray]:
         assert self.scene is not None
         configuration = self.scene.configuration
-        configuration.update(self.backend.q, self.backend.jaw)
-        pose = configuration.measured_pose()
+        if self._joint_offset is None and self._base_error is None:
+            configuration.update(self.backend.q, self.backend.jaw)
+            pose = configuration.measured_pose()
+        else:
+            # Calibration errors: the tool pose is what the robot reports, the forward kinematics of the
+            # encoder joints through the base frame it believes in; the site (seen by the camera) is true.
+            configuration.update(self.backend.measure().q, self.backend.jaw)
+            pose = np.array(configuration.measured_pose(), dtype=float)
+            if self._base_error is not None:
+                pose[:3, 3] += self._base_error
+            configuration.update(self.backend.q, self.backend.jaw)
         tip = pose[:3, 3]
         site = self.site_position()
         noise = self.values["observation_noise_m"]
