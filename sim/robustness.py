@@ -10,13 +10,22 @@ process, keeps its environment and policy between trials, and returns one JSON-r
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
+from psm_control.errors import ConfigurationError
 from sim.disturbances import Disturbance, DisturbanceWrapper
 from sim.randomization import DEFAULT_RANGES, INTEGER_PARAMETERS
+from sim.sweep.space import ParameterRange
 
-__all__ = ["ALIASES", "DISTURBANCE_PARAMETERS", "episode_options", "robustness_episode", "sweep_parameters"]
+__all__ = [
+    "ALIASES",
+    "DISTURBANCE_PARAMETERS",
+    "check_relative_ranges",
+    "episode_options",
+    "robustness_episode",
+    "sweep_parameters",
+]
 
 #: Short names accepted on the command line.
 ALIASES: dict[str, str] = {
@@ -55,6 +64,22 @@ def nominal(name: str) -> float:
     """The nominal value of a randomization parameter: the middle of its default range."""
     low, high = DEFAULT_RANGES[ALIASES.get(name, name)]
     return (low + high) / 2.0
+
+
+def check_relative_ranges(ranges: Iterable[ParameterRange]) -> None:
+    """Refuse ``x`` ranges on parameters without a non-zero nominal value (a multiple of 0 is always 0).
+
+    Raises:
+        ConfigurationError: Naming the parameter and asking for an absolute range.
+    """
+    for r in ranges:
+        if not r.relative:
+            continue
+        full = ALIASES.get(r.name, r.name)
+        if full not in DEFAULT_RANGES or nominal(full) == 0.0:
+            raise ConfigurationError(
+                f"vary.{r.name}", r.describe(), "an absolute LOW:HIGH range (its nominal value is 0)"
+            )
 
 
 def episode_options(params: Mapping[str, float], relative: Mapping[str, bool]) -> dict[str, float]:

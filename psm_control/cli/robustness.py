@@ -75,12 +75,13 @@ def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from sim.envs import gym_id
-    from sim.robustness import sweep_parameters
+    from sim.robustness import check_relative_ranges, sweep_parameters
     from sim.sweep import EpisodeStore, make_trials, parse_ranges, run_trials
     from sim.sweep.report import summarize, write_report
 
     task_id = gym_id(args.task)
     ranges = parse_ranges(args.vary, valid_names=sweep_parameters())
+    check_relative_ranges(ranges)
     trials = make_trials(ranges, args.trials, mode=args.mode, seed=args.seed)
     out = args.out or Path("runs") / f"robustness-{task_id}"
     out.mkdir(parents=True, exist_ok=True)

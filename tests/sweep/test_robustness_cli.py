@@ -62,3 +62,13 @@ def test_simulation_sweep_is_identical_on_local_and_ray(tmp_path: Path) -> None:
         records[backend] = sorted(lines, key=lambda line: json.loads(line)["index"])
     assert len(records["local"]) == 4
     assert records["local"] == records["ray"]
+
+
+def test_multiplier_of_a_zero_nominal_is_refused(tmp_path: Path) -> None:
+    """An x range on a parameter whose nominal value is 0 is refused instead of silently giving 0."""
+    result = run_cli(
+        "robustness", "--policy", "scripted", "--task", "lift", "--vary", "joint_offset=0.5:2x", "--out", str(tmp_path)
+    )
+    assert result.returncode == 1
+    assert "joint_offset" in result.stderr and "absolute" in result.stderr
+    assert not (tmp_path / "episodes.jsonl").exists()
