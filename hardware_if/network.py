@@ -14,10 +14,18 @@ from collections.abc import Mapping, MutableMapping
 
 from psm_control.errors import ConfigurationError
 
-__all__ = ["MAX_DOMAIN_ID", "apply_local_ros_env", "local_ros_env", "run_domain_id"]
+__all__ = ["MAX_DOMAIN_ID", "apply_local_ros_env", "environment_domain_id", "local_ros_env", "run_domain_id"]
 
 #: Largest ROS_DOMAIN_ID that maps to valid UDP ports on Linux for every participant id.
 MAX_DOMAIN_ID = 101
+
+
+def environment_domain_id() -> int:
+    """The domain id in ``$ROS_DOMAIN_ID``, or 0 (ROS 2's own default) when it is unset or not a number."""
+    try:
+        return int(os.environ.get("ROS_DOMAIN_ID", "0"))
+    except ValueError:
+        return 0
 
 
 def run_domain_id(seed: int | None = None) -> int:

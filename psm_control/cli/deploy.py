@@ -29,14 +29,9 @@ import sys
 import time
 from pathlib import Path
 
+from hardware_if.network import environment_domain_id
+
 __all__ = ["add_parser", "run"]
-
-
-def _domain_default() -> int:
-    try:
-        return int(os.environ.get("ROS_DOMAIN_ID", "0"))
-    except ValueError:
-        return 0
 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -58,7 +53,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
     parser.add_argument("--wait", type=float, default=30.0, help="seconds to wait for the arm and task topics")
     parser.add_argument(
-        "--domain-id", type=int, default=_domain_default(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
+        "--domain-id", type=int, default=environment_domain_id(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
     )
     parser.add_argument(
         "--network",

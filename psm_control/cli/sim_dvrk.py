@@ -15,16 +15,10 @@ Needs the ``ros`` extra. Ctrl-C stops it.
 from __future__ import annotations
 
 import argparse
-import os
+
+from hardware_if.network import environment_domain_id
 
 __all__ = ["add_parser", "run"]
-
-
-def _domain_default() -> int:
-    try:
-        return int(os.environ.get("ROS_DOMAIN_ID", "0"))
-    except ValueError:
-        return 0
 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -39,7 +33,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument("--seed", type=int, default=0, help="seed of the task scene's first episode (default: 0)")
     parser.add_argument("--rate", type=float, default=100.0, help="publishing rate [Hz] (default: 100, the dVRK's)")
     parser.add_argument(
-        "--domain-id", type=int, default=_domain_default(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
+        "--domain-id", type=int, default=environment_domain_id(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
     )
     parser.add_argument(
         "--base-xyz",
