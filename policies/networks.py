@@ -11,22 +11,39 @@ from collections.abc import Sequence
 
 import torch
 from torch import nn
+from torch.nn import functional as F  # noqa: N812 (the conventional name)
 
-__all__ = ["Critic", "DeterministicActor", "GaussianActor", "TwinCritic", "mlp"]
+__all__ = ["MLP", "Critic", "DeterministicActor", "GaussianActor", "TwinCritic"]
 
 #: Bounds of the SAC actor's log standard deviation (as in SAC's reference code).
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0
 
 
-def mlp(in_dim: int, hidden: Sequence[int], out_dim: int) -> nn.Sequential:
-    """A ReLU MLP with a linear output layer."""
-    layers: list[nn.Module] = []
-    last = in_dim
-    for width in hidden:
-        layers += [nn.Linear(last, width), nn.ReLU(inplace=True)]
-        last = width
-    layers.append(nn.Linear(last, out_dim))
-    return nn.Sequential(*layers)
+class MLP(nn.Sequential):
+    """A ReLU MLP with a linear output layer.
+
+    A ``Sequential`` of ``Linear`` and ``ReLU`` modules (so parameters are named ``0.weight``,
+    ``2.weight``, ...), whose forward pass applies the layers' weights directly instead of calling each
+    submodule: with layers this small, the per-module call overhead is a large share of the arithmetic,
+    and acting on a single observation takes half the time. The result is the same as ``Sequential``'s.
+    """
+
+    def __init__(self, in_dim: int, hidden: Sequence[int], out_dim: int) -> None:
+        layers: list[nn.Module] = []
+        last = in_dim
+        for width in hidden:
+            layers += [nn.Linear(last, width), nn.ReLU(inplace=True)]
+            last = width
+        layers.append(nn.Linear(last, out_dim))
+        super().__init__(*layers)
+        # A tuple, not a module attribute: the layers stay registered once, under their indices.
+        self.linears: tuple[nn.Linear, ...] = tuple(m for m in layers if isinstance(m, nn.Linear))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        *hidden, output = self.linears
+        for layer in hidden:
+            x = torch.relu_(F.linear(x, layer.weight, layer.bias))
+        return F.linear(x, output.weight, output.bias)
 
 
 class DeterministicActor(nn.Module):
@@ -34,7 +51,7 @@ class DeterministicActor(nn.Module):
 
     def __init__(self, in_dim: int, act_dim: int, hidden: Sequence[int]) -> None:
         super().__init__()
-        self.net = mlp(in_dim, hidden, act_dim)
+        self.net = MLP(in_dim, hidden, act_dim)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return torch.tanh(self.net(x))
@@ -45,7 +62,7 @@ class Critic(nn.Module):
 
     def __init__(self, in_dim: int, act_dim: int, hidden: Sequence[int]) -> None:
         super().__init__()
-        self.net = mlp(in_dim + act_dim, hidden, 1)
+        self.net = MLP(in_dim + act_dim, hidden, 1)
 
     def forward(self, x: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         return self.net(torch.cat((x, a), dim=-1))
@@ -68,7 +85,7 @@ class GaussianActor(nn.Module):
 
     def __init__(self, in_dim: int, act_dim: int, hidden: Sequence[int]) -> None:
         super().__init__()
-        self.net = mlp(in_dim, hidden, 2 * act_dim)
+        self.net = MLP(in_dim, hidden, 2 * act_dim)
         self.act_dim = act_dim
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
