@@ -21,7 +21,7 @@ from __future__ import annotations
 import importlib
 import math
 import warnings
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import osqp
@@ -30,6 +30,7 @@ import qpsolvers
 from scipy import sparse
 
 from psm_control.errors import InfeasibleProblemError
+from psm_control.reductions import all_of, any_of
 from psm_control.robot import PsmConfiguration
 
 __all__ = ["DifferentialIk", "IkResult", "KeptOsqp"]
@@ -43,8 +44,10 @@ _SOLVE1: Any = getattr(importlib.import_module("numpy.linalg._umath_linalg"), "s
 _STATUS = {int(v): k.removeprefix("OSQP_").lower().replace("_", " ") for k, v in osqp.SolverStatus.__members__.items()}
 
 
-class IkResult(NamedTuple):
+class IkResult:
     """One IK step.
+
+    The control chain reads only ``dq`` each tick; the diagnostics are computed when first read.
 
     Attributes:
         dq: Joint displacement (6,) towards the goal.
@@ -53,10 +56,32 @@ class IkResult(NamedTuple):
         orientation_error_rad: Angle between the current and goal tool orientations [rad].
     """
 
-    dq: np.ndarray
-    residual: float
-    position_error_m: float
-    orientation_error_rad: float
+    __slots__ = ("_error", "_jacobian", "_sqrt_weights", "dq")
+
+    def __init__(self, dq: np.ndarray, jacobian: np.ndarray, error: np.ndarray, sqrt_weights: np.ndarray) -> None:
+        self.dq = dq
+        self._jacobian = jacobian
+        self._error = error
+        self._sqrt_weights = sqrt_weights
+
+    @property
+    def residual(self) -> float:
+        weighted = self._sqrt_weights * (self._jacobian @ self.dq - self._error)
+        return math.sqrt(float(weighted @ weighted))
+
+    @property
+    def position_error_m(self) -> float:
+        return float(np.linalg.norm(self._error[:3]))
+
+    @property
+    def orientation_error_rad(self) -> float:
+        return float(np.linalg.norm(self._error[3:]))
+
+    def __repr__(self) -> str:
+        return (
+            f"IkResult(dq={self.dq}, residual={self.residual:.3g}, position_error_m={self.position_error_m:.3g}, "
+            f"orientation_error_rad={self.orientation_error_rad:.3g})"
+        )
 
 
 class KeptOsqp:
@@ -121,11 +146,11 @@ class KeptOsqp:
                 **({"Px": Px} if Px is not None else {}),
                 **({"Ax": Ax} if Ax is not None else {}),
             )
-        if self._direct is not None:
-            self._direct.solve()
-            info = self._direct.info
-            status = _STATUS.get(int(info.status_val), "failed")
-            return self._direct.solution.x, self._direct.solution.y, status, int(info.iter)
+        direct = self._direct
+        if direct is not None:
+            direct.solve()
+            info, solution = direct.info, direct.solution
+            return solution.x, solution.y, _STATUS.get(info.status_val, "failed"), info.iter
         result = self._solver.solve(raise_error=False)
         return result.x, result.y, str(result.info.status), int(result.info.iter)
 
@@ -230,7 +255,7 @@ class DifferentialIk:
         b = JW @ error  # the cost's linear term is -b
         lower = np.asarray(lower, dtype=float)
         upper = np.asarray(upper, dtype=float)
-        if np.count_nonzero(lower <= upper) != self.dof:
+        if not all_of(lower <= upper):
             raise InfeasibleProblemError(
                 "ik", "lower bound above upper bound", self.problem(configuration, goal_local, lower, upper)
             )
@@ -251,18 +276,10 @@ class DifferentialIk:
             dq = _SOLVE1(P, b)
             if not math.isfinite(dq @ dq):
                 dq = np.linalg.solve(P, b)
-            if np.count_nonzero((dq < lower) | (dq > upper)):
+            if any_of(dq < lower) or any_of(dq > upper):
                 dq, _, status, _ = self._qp.solve(
                     -b, np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY), Px=P[self._Px_index]
                 )
-        if dq is None or status not in _SOLVED or np.count_nonzero(np.isfinite(dq)) != self.dof:
+        if dq is None or status not in _SOLVED or not all_of(np.isfinite(dq)):
             raise InfeasibleProblemError("ik", status, self.problem(configuration, goal_local, lower, upper))
-        dq = np.minimum(np.maximum(dq, lower), upper)
-        weighted = self._sqrt_weights * (J @ dq - error)
-        e = error.tolist()
-        return IkResult(
-            dq,
-            math.sqrt(float(weighted @ weighted)),
-            math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]),
-            math.sqrt(e[3] * e[3] + e[4] * e[4] + e[5] * e[5]),
-        )
+        return IkResult(np.minimum(np.maximum(dq, lower), upper), J, error, self._sqrt_weights)

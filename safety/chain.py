@@ -24,6 +24,7 @@ import numpy as np
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from psm_control.errors import TissueRetractError
 from psm_control.ik import DifferentialIk
+from psm_control.reductions import all_of
 from psm_control.robot import PsmModel
 from safety.config import SafetyConfig
 from safety.filter import SafetyFilter
@@ -141,6 +142,7 @@ class ControlChain:
         self._jaw_step = float(self.model.spec.jaw_velocity_limit * self.control_period_s)
         self._base_rotation = self._command_state.base_frame[:3, :3].copy()
         self._base_translation = self._command_state.base_frame[:3, 3].copy()
+        self._base_is_identity = bool(np.array_equal(self._base_rotation, np.eye(3)))
         self._q_center = (self.model.lower + self.model.upper) / 2.0
         self._q_half = (self.model.upper - self.model.lower) / 2.0
 
@@ -151,6 +153,7 @@ class ControlChain:
         self.verifier.set_base_frame(self._command_state.base_frame)
         self._base_rotation = self._command_state.base_frame[:3, :3].copy()
         self._base_translation = self._command_state.base_frame[:3, 3].copy()
+        self._base_is_identity = bool(np.array_equal(self._base_rotation, np.eye(3)))
 
     # -- Controller protocol -------------------------------------------------------------------------
 
@@ -240,7 +243,7 @@ class ControlChain:
             return f"deadman: measurement {now - stamp:.3g} s old > {self.config.deadman_timeout_s} s"
         q = np.asarray(measured.q, dtype=float)
         # One comparison passes a finite in-limit vector (NaN fails it); anything else gets the detailed check.
-        if q.shape != self.model.lower.shape or np.count_nonzero(np.abs(q - self._q_center) <= self._q_half) != q.size:
+        if q.shape != self.model.lower.shape or not all_of(np.abs(q - self._q_center) <= self._q_half):
             try:
                 self.model.check_joints(measured.q, strict=True, name="measured q")
             except TissueRetractError as e:
@@ -299,16 +302,20 @@ class ControlChain:
             dq_nominal = self.ik.solve(self._command_state, self._goal_local, lower, upper).dq
         force = -np.asarray(measured.force_n, dtype=float)  # force_n is the tissue's force on the tool
         base = self._base_rotation
-        tool = base @ self._command_state.local_pose()[:3, 3] + self._base_translation
+        tool = self._command_state.local_pose()[:3, 3]
+        if not self._base_is_identity:  # (an identity product is exact, so skipping it changes nothing)
+            tool = base @ tool
+        tool += self._base_translation
         stiffness = self.stiffness.update(tool, force)
         interventions: tuple[str, ...] = ()
         intervened = active = 0
         if self.safety:
+            jacobian = self._command_state.local_jacobian()[:3]
             state = FilterState(
                 current.q,
                 current.qd,
                 tool,
-                base @ self._command_state.local_jacobian()[:3],
+                jacobian if self._base_is_identity else base @ jacobian,
                 force,
                 stiffness,
                 self.control_period_s,

@@ -32,6 +32,7 @@ from scipy import sparse
 
 from psm_control.errors import InfeasibleProblemError
 from psm_control.ik import KeptOsqp
+from psm_control.reductions import all_of, any_of
 from safety.limits import FilterState, Limit, LimitReport
 
 __all__ = ["FilterResult", "SafetyFilter"]
@@ -42,34 +43,34 @@ _MIN_ROW_NORM = 1e-9
 
 
 class _Reports:
-    """What the reports are made of, turned into :class:`LimitReport` objects only when asked for."""
+    """What the reports are made of, turned into :class:`LimitReport` objects only when asked for.
 
-    __slots__ = ("_active", "_intervened", "_names", "_nominal_worst", "_reports", "_slack")
+    ``worst`` is (2, limits): row 0 the largest ``G dq - h`` per limit at the filtered command, row 1 at
+    the nominal one, in the filter's column order; ``order`` maps it to the caller's order of limits.
+    """
+
+    __slots__ = ("_names", "_order", "_reports", "_slack", "_tolerance", "_worst")
 
     def __init__(
-        self,
-        names: tuple[str, ...],
-        active: np.ndarray,
-        intervened: np.ndarray,
-        nominal_worst: np.ndarray,
-        slack: np.ndarray,
+        self, names: tuple[str, ...], worst: np.ndarray, order: np.ndarray, tolerance: float, slack: np.ndarray
     ) -> None:
         self._names = names
-        self._active = active
-        self._intervened = intervened
-        self._nominal_worst = nominal_worst
+        self._worst = worst
+        self._order = order
+        self._tolerance = tolerance
         self._slack = slack
         self._reports: tuple[LimitReport, ...] | None = None
 
     def build(self) -> tuple[LimitReport, ...]:
         if self._reports is None:
+            worst = self._worst[:, self._order]
             self._reports = tuple(
                 map(
                     LimitReport,
                     self._names,
-                    self._active.tolist(),
-                    self._intervened.tolist(),
-                    np.maximum(self._nominal_worst, 0.0).tolist(),
+                    (worst[0] >= -self._tolerance).tolist(),
+                    (worst[1] > self._tolerance).tolist(),
+                    np.maximum(worst[1], 0.0).tolist(),
                     self._slack.tolist(),
                 )
             )
@@ -205,6 +206,8 @@ class SafetyFilter:
         self._n_bound = len(self._bound)
         self._pair = np.zeros((2, 1, dof))  # [dq, dq_nominal], broadcast against the (bound limits, dof) bounds
         self._excess = np.zeros((2, self.m_rows))  # [G z - h, G z_nominal - h]
+        self._flags = np.zeros((2, len(self.limits)), dtype=bool)  # [active, intervened] per column
+        self._report_tolerance = 1e3 * hard_tolerance
         self._rows = np.zeros((self.m_rows, dof))
         # Bit of each column of the (bound limits, then the others) order: limit i is bit i.
         self._bit_values = np.array([1 << i for i in self._bound + self._rowed], dtype=np.int64)
@@ -256,11 +259,11 @@ class SafetyFilter:
         lower, upper = self._bound_lower, self._bound_upper
         for k, limit in self._bound_limits:
             lower[k], upper[k] = limit.compute_joint_bounds(state)
-        lb = lower.max(axis=0)
+        lb = np.maximum.reduce(lower, axis=0)
         lb /= self._scale
-        ub = upper.min(axis=0)
+        ub = np.minimum.reduce(upper, axis=0)
         ub /= self._scale
-        if np.count_nonzero(lb <= ub + self.hard_tolerance) != self.dof:
+        if not all_of(lb <= ub + self.hard_tolerance):
             raise InfeasibleProblemError("safety_filter", f"joint bounds conflict: lower {lb} above upper {ub}")
         self._lb = lb
         self._ub = np.maximum(ub, lb, out=ub)
@@ -269,9 +272,9 @@ class SafetyFilter:
             for rows, limit in self._row_limits:
                 G[rows], h[rows] = limit.compute_qp_inequalities(state)
             G *= self._scale
-            norms = np.einsum("ij,ij->i", G, G)
-            np.sqrt(norms, out=norms)
-            norm = np.maximum.reduceat(norms, self._row_starts)
+            # sqrt is monotonic, so the largest row norm per limit is the root of the largest square.
+            squares = np.einsum("ij,ij->i", G, G)
+            norm = np.sqrt(np.maximum.reduceat(squares, self._row_starts))
             self._norm = np.maximum(norm, _MIN_ROW_NORM, out=norm)
             self._row_norm = norm[self._row_owner]
 
@@ -309,12 +312,18 @@ class SafetyFilter:
         sigma = self._zero_slack
         solved = False
         self._iterations = 0
-        if self.naive or (self.m_rows and np.count_nonzero(self._G @ z > self._h)):
-            x, status = self._solve(z_nominal)
-            if x is None or status not in _SOLVED or np.count_nonzero(np.isfinite(x)) != x.size:
+        if self.naive or (self.m_rows and any_of(self._G @ z > self._h)):
+            x, slack, status = self._solve(z_nominal)
+            if (
+                x is None
+                or status not in _SOLVED
+                or not all_of(np.isfinite(x))
+                or (slack is not self._zero_slack and not all_of(np.isfinite(slack)))
+            ):
                 raise InfeasibleProblemError("safety_filter", status, self._problem(dq_nominal))
-            z = np.minimum(np.maximum(x[: self.dof], self._lb), self._ub)
-            sigma = np.maximum(x[self.dof :], 0.0)
+            z = np.minimum(np.maximum(x, self._lb), self._ub)
+            if slack is not self._zero_slack:
+                sigma = np.maximum(slack, 0.0)
             solved = True
         dq = z * self._scale
         active, intervened, detail = self._reports(dq_nominal, dq, z_nominal, z, sigma)
@@ -344,14 +353,18 @@ class SafetyFilter:
 
         Returns the active and intervened bit masks (limit ``i`` is bit ``i``) and the reports' data.
         """
-        tolerance = 1e3 * self.hard_tolerance
-        # Row 0 for the filtered step, row 1 for the nominal one, both at once.
-        pair = self._pair
-        pair[0, 0] = dq
-        pair[1, 0] = dq_nominal
-        worst = np.maximum(pair - self._bound_upper, self._bound_lower - pair).max(axis=2)
-        if self._n_bound and float(worst[0].max()) > self.hard_tolerance:
-            raise InfeasibleProblemError("safety_filter", "a joint bound is violated after the clip")
+        # Row 0 for the filtered step, row 1 for the nominal one, both at once; columns are the bound
+        # limits, then the others.
+        worst = np.empty((2, len(self.limits)))
+        n_bound = self._n_bound
+        if n_bound:
+            pair = self._pair
+            pair[0, 0] = dq
+            pair[1, 0] = dq_nominal
+            excess = np.maximum(pair - self._bound_upper, self._bound_lower - pair)
+            np.maximum.reduce(excess, axis=2, out=worst[:, :n_bound])
+            if np.maximum.reduce(worst[0, :n_bound]) > self.hard_tolerance:
+                raise InfeasibleProblemError("safety_filter", "a joint bound is violated after the clip")
         slack = self._no_slack
         if self.m_rows:
             excess = self._excess
@@ -362,21 +375,24 @@ class SafetyFilter:
                 hard = float(excess[0][self._hard_row].max())
                 if hard > self.hard_tolerance:
                     raise InfeasibleProblemError("safety_filter", f"hard limit violated by {hard:.3g} after the solve")
-            worst = np.concatenate((worst, np.maximum.reduceat(excess, self._row_starts, axis=1)), axis=1)
-            if self.n_slack and sigma.any():
+            np.maximum.reduceat(excess, self._row_starts, axis=1, out=worst[:, n_bound:])
+            if sigma is not self._zero_slack and sigma.any():
                 slack = np.zeros(len(self.limits))
                 slack[self._soft] = sigma * self._norm[self._soft_of_rowed]
-        # Columns are (bound limits, then the others); the bits and the reports are in the caller's order.
-        active = worst[0] >= -tolerance
-        intervened = worst[1] > tolerance
-        order = self._report_order
-        detail = _Reports(self._names, active[order], intervened[order], worst[1][order], slack)
-        return int(active @ self._bit_values), int(intervened @ self._bit_values), detail
+        flags = self._flags
+        tolerance = self._report_tolerance
+        np.greater_equal(worst[0], -tolerance, out=flags[0])
+        np.greater(worst[1], tolerance, out=flags[1])
+        active, intervened = (flags @ self._bit_values).tolist()
+        return active, intervened, _Reports(self._names, worst, self._report_order, tolerance, slack)
 
     # -- solvers ------------------------------------------------------------------------------------
 
-    def _solve(self, z_nominal: np.ndarray) -> tuple[np.ndarray | None, str]:
-        """Solve this tick's QP: without slack first, with it only when that does not settle it."""
+    def _solve(self, z_nominal: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, str]:
+        """Solve this tick's QP: without slack first, with it only when that does not settle it.
+
+        Returns ``(z, sigma, status)``; ``sigma`` is the shared zero vector when no slack was needed.
+        """
         row_norm = self._row_norm
         rows = np.divide(self._G, row_norm[:, None], out=self._rows)
         h = self._h / row_norm
@@ -392,11 +408,13 @@ class SafetyFilter:
         # solution is exactly the penalised problem's (slack zero), and ADMM converges fast on it.
         x, y_rows, status, iterations = self._stage(False, lb, ub, rows, u_rows)
         self._iterations = iterations
-        if status in _SOLVED and x is not None and not np.count_nonzero(y_rows > self._row_penalty):
-            return np.concatenate([x, self._zero_slack]), status
+        if status in _SOLVED and x is not None and not any_of(y_rows > self._row_penalty):
+            return x, self._zero_slack, status
         x, _, status, iterations = self._stage(True, lb, ub, rows, u_rows)
         self._iterations += iterations
-        return x, status
+        if x is None:
+            return None, self._zero_slack, status
+        return x[: self.dof], x[self.dof :], status
 
     def _stage(
         self, slack: bool, lb: np.ndarray, ub: np.ndarray, rows: np.ndarray, u_rows: np.ndarray

@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from psm_control.commands import JointCommand
+from psm_control.reductions import all_of
 from psm_control.robot import PsmConfiguration
 from safety.config import SafetyConfig
 
@@ -62,6 +63,7 @@ class CommandVerifier:
         self._base = configuration.base_frame
         self._rotation = self._base[:3, :3].copy()
         self._translation = self._base[:3, 3].copy()
+        self._identity_rotation = bool(np.array_equal(self._rotation, np.eye(3)))
         self._box_center = (self.box_lower + self.box_upper) / 2.0
         self._box_half = (self.box_upper - self.box_lower) / 2.0
         self.last_safe: JointCommand | None = None
@@ -79,6 +81,7 @@ class CommandVerifier:
         self._base = np.array(transform_rcm_to_base, dtype=float)
         self._rotation = self._base[:3, :3].copy()
         self._translation = self._base[:3, 3].copy()
+        self._identity_rotation = bool(np.array_equal(self._rotation, np.eye(3)))
 
     def reset(self, command: JointCommand) -> None:
         """Accept ``command`` as the safe command to hold (the measured state at reset)."""
@@ -99,7 +102,7 @@ class CommandVerifier:
             np.concatenate((q, qd, qdd), out=joints)
             joints -= self._center
             np.abs(joints, out=joints)
-            joints_ok = np.count_nonzero(joints <= self._half_width) == self._center.size
+            joints_ok = bool(all_of(joints <= self._half_width))
         except (ValueError, TypeError):  # wrong shapes or types: the detailed checks say which
             joints_ok = False
         try:
@@ -134,11 +137,12 @@ class CommandVerifier:
     def _workspace_problem(self, q: np.ndarray) -> str:
         self._q_full[: q.size] = q
         pin.forwardKinematics(self._model, self._data, self._q_full)
-        tip = self._rotation @ pin.updateFramePlacement(self._model, self._data, self._tip).translation
-        tip += self._translation
+        tip = pin.updateFramePlacement(self._model, self._data, self._tip).translation
+        # (An identity product is exact, so skipping it changes nothing.)
+        tip = (tip if self._identity_rotation else self._rotation @ tip) + self._translation
         offset = tip - self._box_center
         np.abs(offset, out=offset)
-        if np.count_nonzero(offset <= self._box_half) == 3:
+        if all_of(offset <= self._box_half):
             return ""
         outside = (tip < self.box_lower) | (tip > self.box_upper)
         if np.any(outside):
