@@ -10,6 +10,7 @@ success rate (mean over seeds, 95 % t-interval) beside the paper's, and learning
 from __future__ import annotations
 
 import csv
+import json
 import math
 import multiprocessing
 import time
@@ -24,6 +25,7 @@ import numpy as np
 from policies.config import ALGORITHMS, TrainConfig
 
 __all__ = [
+    "OUTCOME_FILE",
     "PAPER_TABLE1",
     "PAPER_TABLE2",
     "TASKS",
@@ -80,6 +82,7 @@ class RunOutcome:
     curve: list[tuple[int, float]] = field(default_factory=list)
     wall_seconds: float = 0.0
     steps_per_second: float = float("nan")
+    resumed_from: int = 0
 
 
 def plan(
@@ -111,10 +114,17 @@ def plan(
     return runs
 
 
+#: Written in a run's folder when it finishes: what it scored, how long it took, on which code.
+OUTCOME_FILE = "outcome.json"
+
+
 def _execute(run: Run) -> RunOutcome:
-    """Train one run (in a worker process); returns its outcome."""
+    """Train one run (in a worker process); returns its outcome. A finished run is read, not retrained."""
     from policies.trainer import RunSpec, train
 
+    finished = _read_outcome(run)
+    if finished is not None:
+        return finished
     start = time.perf_counter()
     config = TrainConfig(algo=run.algo, **dict(run.overrides))
     spec = RunSpec(
@@ -127,7 +137,52 @@ def _execute(run: Run) -> RunOutcome:
     result = train(spec, config)
     curve = _read_curve(run.out_dir / "eval.csv")
     success = curve[-1][1] if curve else result.final_success
-    return RunOutcome(run, success, curve, time.perf_counter() - start, result.learning_steps_per_second)
+    outcome = RunOutcome(
+        run, success, curve, time.perf_counter() - start, result.learning_steps_per_second, result.resumed_from
+    )
+    record = {
+        "episodes": run.episodes,
+        "success": success,
+        "curve": curve,
+        "wall_seconds": outcome.wall_seconds,
+        "steps_per_second": outcome.steps_per_second,
+        "resumed_from": outcome.resumed_from,
+        "commit": _commit(),
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    (run.out_dir / OUTCOME_FILE).write_text(json.dumps(record, indent=1) + "\n")
+    return outcome
+
+
+def _read_outcome(run: Run) -> RunOutcome | None:
+    path = run.out_dir / OUTCOME_FILE
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    if record.get("episodes") != run.episodes:
+        return None
+    curve = [(int(e), float(s)) for e, s in record["curve"]]
+    return RunOutcome(
+        run, float(record["success"]), curve, float(record["wall_seconds"]), float(record["steps_per_second"]),
+        int(record.get("resumed_from", 0)),
+    )  # fmt: skip
+
+
+def _commit() -> str:
+    """The git commit of the code that ran, or "" outside a checkout."""
+    import subprocess
+
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=Path(__file__).parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.stdout.strip() if out.returncode == 0 else ""
 
 
 def _read_curve(path: Path) -> list[tuple[int, float]]:
@@ -234,13 +289,15 @@ def reproduce(out_dir: Path, runs: Sequence[Run], jobs: int = 1) -> tuple[Path, 
     plot_curves(outcomes, out_dir / "curves.png", demos)
     per_run = [
         f"| {o.run.task} | {o.run.algo} | {o.run.demos} | {o.run.seed} | {100 * o.success:.0f} | "
-        f"{o.wall_seconds:.0f} | {o.steps_per_second:.0f} |"
+        f"{o.wall_seconds:.0f}{f' (from episode {o.resumed_from})' if o.resumed_from else ''} | "
+        f"{o.steps_per_second:.0f} |"
         for o in outcomes
     ]
     text = [
         "# Reproduction of the seed paper's evaluation",
         "",
-        f"{len(runs)} runs, {jobs} parallel processes, wall time {wall:.0f} s.",
+        f"{len(runs)} runs, {jobs} parallel processes, wall time {wall:.0f} s in this sitting (runs finished "
+        "in an earlier sitting are read from their outcome.json, with their own wall time).",
         "",
         tables(outcomes, demos),
         "![learning curves](curves.png)",

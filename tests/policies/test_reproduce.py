@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
-from policies.reproduce import PAPER_TABLE1, Run, RunOutcome, plan, reproduce, tables
+from policies.reproduce import OUTCOME_FILE, PAPER_TABLE1, Run, RunOutcome, plan, reproduce, tables
 from policies.toy_env import TOY_TASK_ID
 
 TINY = {"random_steps": 50, "updates_per_episode": 2, "batch_size": 16, "hidden_sizes": (16,), "bc_pretrain_steps": 5}
@@ -44,3 +45,19 @@ def test_reproduce_smoke_on_the_toy_task(tmp_path: Path) -> None:
     text = path.read_text()
     assert "| toy |" in text and "Table 1" in text
     assert (tmp_path / "curves.png").stat().st_size > 1000
+
+
+def test_reproduce_reads_finished_runs_instead_of_training_them_again(tmp_path: Path) -> None:
+    """A run with an outcome.json is not retrained: a reproduction spread over sittings resumes run by run."""
+    runs = plan(
+        tmp_path, episodes=2, tasks={"toy": TOY_TASK_ID}, algos=("ddpg",), seeds=(1,), demos=0,
+        eval_every=1, eval_episodes=1, overrides=TINY,
+    )  # fmt: skip
+    _, first = reproduce(tmp_path, runs, jobs=1)
+    record = json.loads((runs[0].out_dir / OUTCOME_FILE).read_text())
+    assert record["success"] == first[0].success and record["curve"] == [list(p) for p in first[0].curve]
+    policy = runs[0].out_dir / "policy.safetensors"
+    written = policy.stat().st_mtime_ns
+    _, again = reproduce(tmp_path, runs, jobs=1)
+    assert policy.stat().st_mtime_ns == written
+    assert again[0].wall_seconds == first[0].wall_seconds and again[0].curve == first[0].curve
