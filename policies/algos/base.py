@@ -21,7 +21,7 @@ from policies.buffers import Batch, EpisodeBuffer, RewardFn
 from policies.config import TrainConfig
 from policies.normalizer import Normalizer
 
-__all__ = ["Agent", "Dims", "TensorBatch", "frozen", "polyak"]
+__all__ = ["Agent", "Batches", "Dims", "FusedAdam", "TensorBatch", "adam", "frozen", "polyak"]
 
 
 class Dims(NamedTuple):
@@ -42,13 +42,41 @@ class TensorBatch(NamedTuple):
     next_action: torch.Tensor
     done: torch.Tensor
 
-    def cat(self, other: TensorBatch) -> TensorBatch:
-        """Rows of ``self`` followed by rows of ``other``."""
-        return TensorBatch(*(torch.cat((a, b)) for a, b in zip(self, other, strict=True)))
-
     def rows(self, start: int, stop: int) -> TensorBatch:
         """Rows ``start:stop``."""
         return TensorBatch(*(t[start:stop] for t in self))
+
+    def interleave(self, other: TensorBatch, block: int) -> TensorBatch:
+        """Blocks of ``block`` rows of ``self`` and of ``other``, alternating (both of the same length)."""
+        n = len(self.x) // block
+        return TensorBatch(
+            *(
+                torch.cat((a.view(n, block, -1), b.view(n, block, -1)), 1).view(2 * n * block, -1)
+                for a, b in zip(self, other, strict=True)
+            )
+        )
+
+
+class Batches(NamedTuple):
+    """One update's transitions: the agent's rows, followed by as many demonstration rows if any.
+
+    Algorithms that learn from agent and demonstration rows stacked use ``both`` as it is: the rows
+    of every update of an episode are laid out this way once, not concatenated update by update.
+    """
+
+    both: TensorBatch
+    agent_rows: int
+
+    @property
+    def agent(self) -> TensorBatch:
+        """The agent's rows."""
+        return self.both if len(self.both.x) == self.agent_rows else self.both.rows(0, self.agent_rows)
+
+    @property
+    def demo(self) -> TensorBatch | None:
+        """The demonstration rows, or None."""
+        total = len(self.both.x)
+        return None if total == self.agent_rows else self.both.rows(self.agent_rows, total)
 
 
 @torch.no_grad()
@@ -181,7 +209,7 @@ class Agent(abc.ABC):
         """Every optimiser by name (checkpointed for resuming)."""
 
     @abc.abstractmethod
-    def update(self, batch: TensorBatch, demo: TensorBatch | None) -> dict[str, float]:
+    def update(self, batches: Batches) -> dict[str, float]:
         """One gradient update from an agent batch and, for demonstration-based algorithms, a demo batch."""
 
     def extra_tensors(self) -> dict[str, torch.Tensor]:
@@ -253,14 +281,13 @@ class Agent(abc.ABC):
         if n_updates <= 0 or len(buffer) == 0:
             return {}
         B = self.config.batch_size
-        agent = self.sample(buffer, n_updates * B, reward_fn, self.agent_reward())
-        demo = None
+        data = self.sample(buffer, n_updates * B, reward_fn, self.agent_reward())
         if demos is not None and len(demos) > 0 and self.config.uses_demos:
-            demo = self.sample(demos, n_updates * B, reward_fn, self.demo_reward())
+            data = data.interleave(self.sample(demos, n_updates * B, reward_fn, self.demo_reward()), B)
+        rows = len(data.x) // n_updates
         metrics: dict[str, float] = {}
         for i in range(n_updates):
-            rows = (i * B, (i + 1) * B)
-            metrics = self.update(agent.rows(*rows), None if demo is None else demo.rows(*rows))
+            metrics = self.update(Batches(data.rows(i * rows, (i + 1) * rows), B))
             self.updates += 1
         return metrics
 

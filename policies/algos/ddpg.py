@@ -17,7 +17,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812 (the conventional name)
 
-from policies.algos.base import Agent, TensorBatch, adam, frozen, polyak
+from policies.algos.base import Agent, Batches, TensorBatch, adam, frozen, polyak
 from policies.networks import Critic, DeterministicActor
 
 __all__ = ["DDPG"]
@@ -59,31 +59,32 @@ class DDPG(Agent):
         """Range the critic target is clipped to: returns of 0/-1 rewards."""
         return -1.0 / (1.0 - self.config.gamma), 0.0
 
-    def critic_target_value(self, batch: TensorBatch, demo: TensorBatch | None) -> torch.Tensor:
-        """The critic's regression target for ``batch`` (no gradient)."""
+    def critic_target_value(self, batch: TensorBatch, batches: Batches) -> torch.Tensor:
+        """The critic's regression target for ``batch``, the critic's rows of ``batches`` (no gradient)."""
         with torch.no_grad():
             next_q = self.critic_target(batch.next_x, self.actor_target(batch.next_x))
             target = batch.reward + self.config.gamma * (1.0 - batch.done) * next_q
             return target.clamp(*self.q_bounds)
 
-    def critic_batch(self, batch: TensorBatch, demo: TensorBatch | None) -> TensorBatch:
-        """The transitions the critic learns from (the agent batch here)."""
-        return batch
+    def critic_batch(self, batches: Batches) -> TensorBatch:
+        """The transitions the critic learns from (the agent's here)."""
+        return batches.agent
 
-    def actor_loss(self, batch: TensorBatch, demo: TensorBatch | None) -> tuple[torch.Tensor, dict[str, float]]:
-        """-Q(s, pi(s)) plus the action penalty, over the agent batch."""
-        action = self._actor(batch.x)
-        loss = -self.critic(batch.x, action).mean() + self.config.action_l2 * action.pow(2).mean()
+    def actor_loss(self, batches: Batches) -> tuple[torch.Tensor, dict[str, float]]:
+        """-Q(s, pi(s)) plus the action penalty, over the agent's rows."""
+        x = batches.agent.x
+        action = self._actor(x)
+        loss = -self.critic(x, action).mean() + self.config.action_l2 * action.pow(2).mean()
         return loss, {}
 
-    def update(self, batch: TensorBatch, demo: TensorBatch | None) -> dict[str, float]:
-        cb = self.critic_batch(batch, demo)
-        target = self.critic_target_value(cb, demo)
+    def update(self, batches: Batches) -> dict[str, float]:
+        cb = self.critic_batch(batches)
+        target = self.critic_target_value(cb, batches)
         critic_loss = F.mse_loss(self.critic(cb.x, cb.action), target)
         # The actor's gradient flows through the critic's input only: with the critic's weights frozen
         # while the actor loss is built, one backward pass gives each network the gradient of its own loss.
         with frozen(self.critic_params):
-            actor_loss, metrics = self.actor_loss(batch, demo)
+            actor_loss, metrics = self.actor_loss(batches)
         self.optimizer.zero_grad(set_to_none=True)
         (critic_loss + actor_loss).backward()
         self.optimizer.step()

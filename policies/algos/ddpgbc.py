@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import torch
 
-from policies.algos.base import TensorBatch
+from policies.algos.base import Batches, TensorBatch
 from policies.algos.ddpg import DDPG
 
 __all__ = ["DDPGBC"]
@@ -25,13 +25,15 @@ class DDPGBC(DDPG):
 
     name = "ddpgbc"
 
-    def critic_batch(self, batch: TensorBatch, demo: TensorBatch | None) -> TensorBatch:
-        return batch if demo is None else batch.cat(demo)
+    def critic_batch(self, batches: Batches) -> TensorBatch:
+        return batches.both
 
     def q_filter(self, x: torch.Tensor, demo_action: torch.Tensor, policy_action: torch.Tensor) -> torch.Tensor:
         """1.0 where Q_targ(s, a_demo) >= Q_targ(s, pi(s)), else 0.0 (one per row; no gradient)."""
         with torch.no_grad():
-            return (self.critic_target(x, demo_action) >= self.critic_target(x, policy_action)).float()
+            # Both actions in one pass: half the per-call overhead, and the rows' values are unchanged.
+            q = self.critic_target(torch.cat((x, x)), torch.cat((demo_action, policy_action)))
+            return (q[: len(x)] >= q[len(x) :]).float()
 
     def bc_loss(self, demo: TensorBatch, policy_action: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
         """The (optionally Q-filtered) mean squared distance to the demonstrated actions."""
@@ -41,12 +43,13 @@ class DDPGBC(DDPG):
         mask = self.q_filter(demo.x, demo.action, policy_action.detach())
         return (mask * dist).mean(), {"q_filter_pass": mask.mean().item()}
 
-    def actor_loss(self, batch: TensorBatch, demo: TensorBatch | None) -> tuple[torch.Tensor, dict[str, float]]:
+    def actor_loss(self, batches: Batches) -> tuple[torch.Tensor, dict[str, float]]:
+        demo = batches.demo
         if demo is None:
-            return super().actor_loss(batch, demo)
-        x = torch.cat((batch.x, demo.x))
+            return super().actor_loss(batches)
+        x = batches.both.x
         action = self.actor(x)
         loss = -self.critic(x, action).mean() + self.config.action_l2 * action.pow(2).mean()
-        bc, metrics = self.bc_loss(demo, action[len(batch.x) :])
+        bc, metrics = self.bc_loss(demo, action[batches.agent_rows :])
         metrics["bc_loss"] = bc.item()
         return loss + self.config.bc_weight * bc, metrics

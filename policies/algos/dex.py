@@ -17,7 +17,7 @@ from __future__ import annotations
 import torch
 from torch.nn import functional as F  # noqa: N812 (the conventional name)
 
-from policies.algos.base import TensorBatch
+from policies.algos.base import Batches, TensorBatch
 from policies.algos.ddpg import DDPG
 
 __all__ = ["DEX", "propagate_actions"]
@@ -45,9 +45,10 @@ class DEX(DDPG):
     def q_bounds(self) -> tuple[float, float]:
         return -self.config.bc_weight / (1.0 - self.config.gamma), 0.0
 
-    def critic_target_value(self, batch: TensorBatch, demo: TensorBatch | None) -> torch.Tensor:
+    def critic_target_value(self, batch: TensorBatch, batches: Batches) -> torch.Tensor:
+        demo = batches.demo
         if demo is None:
-            return super().critic_target_value(batch, demo)
+            return super().critic_target_value(batch, batches)
         with torch.no_grad():
             next_action = self.actor_target(batch.next_x)
             next_q = self.critic_target(batch.next_x, next_action)
@@ -56,9 +57,11 @@ class DEX(DDPG):
             target = target + self.config.bc_weight * self.gap(guide, next_action)
             return target.clamp(*self.q_bounds)
 
-    def actor_loss(self, batch: TensorBatch, demo: TensorBatch | None) -> tuple[torch.Tensor, dict[str, float]]:
+    def actor_loss(self, batches: Batches) -> tuple[torch.Tensor, dict[str, float]]:
+        demo = batches.demo
         if demo is None:
-            return super().actor_loss(batch, demo)
+            return super().actor_loss(batches)
+        batch = batches.agent
         action = self.actor(batch.x)
         with torch.no_grad():
             guide = propagate_actions(batch.x, demo.x, demo.action, self.config.dex_k)

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812 (the conventional name)
 
-from policies.algos.base import Agent, TensorBatch, adam, frozen, polyak
+from policies.algos.base import Agent, Batches, adam, frozen, polyak
 from policies.networks import GaussianActor, TwinCritic
 
 __all__ = ["SQIL"]
@@ -70,8 +70,8 @@ class SQIL(Agent):
             action, _ = self._actor.sample(torch.from_numpy(self.inputs(obs, goal)))
         return action.numpy()
 
-    def update(self, batch: TensorBatch, demo: TensorBatch | None) -> dict[str, float]:
-        b = batch if demo is None else batch.cat(demo)
+    def update(self, batches: Batches) -> dict[str, float]:
+        b = batches.both
         alpha = self.log_alpha.detach().exp()
         with torch.no_grad():
             next_action, next_logp = self._actor.sample(b.next_x)
