@@ -23,6 +23,7 @@ import numpy as np
 
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from psm_control.errors import TissueRetractError
+from psm_control.frames import BaseTransform
 from psm_control.ik import DifferentialIk
 from psm_control.reductions import all_of
 from psm_control.robot import PsmModel
@@ -140,9 +141,7 @@ class ControlChain:
         self._zeros = np.zeros(self.model.dof)
         self._negative_step = -self.step
         self._jaw_step = float(self.model.spec.jaw_velocity_limit * self.control_period_s)
-        self._base_rotation = self._command_state.base_frame[:3, :3].copy()
-        self._base_translation = self._command_state.base_frame[:3, 3].copy()
-        self._base_is_identity = bool(np.array_equal(self._base_rotation, np.eye(3)))
+        self._base = BaseTransform(self._command_state.base_frame)
         self._q_center = (self.model.lower + self.model.upper) / 2.0
         self._q_half = (self.model.upper - self.model.lower) / 2.0
 
@@ -151,9 +150,7 @@ class ControlChain:
         for state in (self._command_state, self._measured_state, self._verifier_state):
             state.set_base_frame(transform_rcm_to_base)
         self.verifier.set_base_frame(self._command_state.base_frame)
-        self._base_rotation = self._command_state.base_frame[:3, :3].copy()
-        self._base_translation = self._command_state.base_frame[:3, 3].copy()
-        self._base_is_identity = bool(np.array_equal(self._base_rotation, np.eye(3)))
+        self._base = BaseTransform(self._command_state.base_frame)
 
     # -- Controller protocol -------------------------------------------------------------------------
 
@@ -301,21 +298,16 @@ class ControlChain:
             upper = np.minimum(self.model.upper - q, self.step)
             dq_nominal = self.ik.solve(self._command_state, self._goal_local, lower, upper).dq
         force = -np.asarray(measured.force_n, dtype=float)  # force_n is the tissue's force on the tool
-        base = self._base_rotation
-        tool = self._command_state.local_pose()[:3, 3]
-        if not self._base_is_identity:  # (an identity product is exact, so skipping it changes nothing)
-            tool = base @ tool
-        tool += self._base_translation
+        tool = self._base.point(self._command_state.local_pose()[:3, 3])
         stiffness = self.stiffness.update(tool, force)
         interventions: tuple[str, ...] = ()
         intervened = active = 0
         if self.safety:
-            jacobian = self._command_state.local_jacobian()[:3]
             state = FilterState(
                 current.q,
                 current.qd,
                 tool,
-                jacobian if self._base_is_identity else base @ jacobian,
+                self._base.vectors(self._command_state.local_jacobian()[:3]),
                 force,
                 stiffness,
                 self.control_period_s,

@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from psm_control.commands import JointCommand
+from psm_control.frames import BaseTransform
 from psm_control.reductions import all_of
 from psm_control.robot import PsmConfiguration
 from safety.config import SafetyConfig
@@ -60,10 +61,7 @@ class CommandVerifier:
         self._data = self._model.createData()
         self._q_full = np.zeros(self._model.nq)
         self._tip = configuration.model.frame_ids.tool_tip
-        self._base = configuration.base_frame
-        self._rotation = self._base[:3, :3].copy()
-        self._translation = self._base[:3, 3].copy()
-        self._identity_rotation = bool(np.array_equal(self._rotation, np.eye(3)))
+        self._transform = BaseTransform(configuration.base_frame)
         self._box_center = (self.box_lower + self.box_upper) / 2.0
         self._box_half = (self.box_upper - self.box_lower) / 2.0
         self.last_safe: JointCommand | None = None
@@ -78,10 +76,7 @@ class CommandVerifier:
 
     def set_base_frame(self, transform_rcm_to_base: np.ndarray) -> None:
         """Use a new base frame (4x4 pose of the RCM) for the workspace check."""
-        self._base = np.array(transform_rcm_to_base, dtype=float)
-        self._rotation = self._base[:3, :3].copy()
-        self._translation = self._base[:3, 3].copy()
-        self._identity_rotation = bool(np.array_equal(self._rotation, np.eye(3)))
+        self._transform = BaseTransform(transform_rcm_to_base)
 
     def reset(self, command: JointCommand) -> None:
         """Accept ``command`` as the safe command to hold (the measured state at reset)."""
@@ -137,9 +132,7 @@ class CommandVerifier:
     def _workspace_problem(self, q: np.ndarray) -> str:
         self._q_full[: q.size] = q
         pin.forwardKinematics(self._model, self._data, self._q_full)
-        tip = pin.updateFramePlacement(self._model, self._data, self._tip).translation
-        # (An identity product is exact, so skipping it changes nothing.)
-        tip = (tip if self._identity_rotation else self._rotation @ tip) + self._translation
+        tip = self._transform.point(pin.updateFramePlacement(self._model, self._data, self._tip).translation)
         offset = tip - self._box_center
         np.abs(offset, out=offset)
         if all_of(offset <= self._box_half):
