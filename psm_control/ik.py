@@ -204,7 +204,6 @@ class DifferentialIk:
         self._Px_index = (rows, cols)  # CSC order of the upper triangle
         P_pattern = sparse.csc_matrix((np.ones(rows.size), (rows, cols)), shape=(dof, dof))
         self._qp = KeptOsqp(P_pattern, sparse.identity(dof, format="csc"), self._settings)
-        self._error = np.empty(6)
 
     def errors(self, configuration: PsmConfiguration, goal_local: np.ndarray) -> np.ndarray:
         """Return ``[e_p, e_o]`` (6,): position [m] and orientation [rad] error about the RCM."""

@@ -361,8 +361,8 @@ class SafetyFilter:
             pair = self._pair
             pair[0, 0] = dq
             pair[1, 0] = dq_nominal
-            excess = np.maximum(pair - self._bound_upper, self._bound_lower - pair)
-            np.maximum.reduce(excess, axis=2, out=worst[:, :n_bound])
+            beyond = np.maximum(pair - self._bound_upper, self._bound_lower - pair)  # (2, bound limits, dof)
+            np.maximum.reduce(beyond, axis=2, out=worst[:, :n_bound])
             if np.maximum.reduce(worst[0, :n_bound]) > self.hard_tolerance:
                 raise InfeasibleProblemError("safety_filter", "a joint bound is violated after the clip")
         slack = self._no_slack
