@@ -33,6 +33,7 @@ from scipy import sparse
 from psm_control.errors import InfeasibleProblemError
 from psm_control.ik import KeptOsqp
 from psm_control.reductions import all_of, any_of
+from safety.halfspace import project_onto_box_and_halfspace
 from safety.limits import FilterState, Limit, LimitReport
 
 __all__ = ["FilterResult", "SafetyFilter"]
@@ -40,6 +41,7 @@ __all__ = ["FilterResult", "SafetyFilter"]
 _INFINITY = 1e30  # OSQP's OSQP_INFTY: bounds beyond it are infinite
 _SOLVED = ("solved", "solved inaccurate")
 _MIN_ROW_NORM = 1e-9
+_NONE = np.zeros(0, dtype=np.intp)
 
 
 class _Reports:
@@ -312,7 +314,14 @@ class SafetyFilter:
         sigma = self._zero_slack
         solved = False
         self._iterations = 0
-        if self.naive or (self.m_rows and any_of(self._G @ z > self._h)):
+        violated = np.flatnonzero(self._G @ z > self._h) if self.m_rows else _NONE
+        projected = None
+        if violated.size == 1 and not self.naive:
+            projected = self._project_one_row(int(violated[0]), z_nominal)
+        if projected is not None:
+            z = projected
+            solved = True
+        elif self.naive or violated.size:
             x, slack, status = self._solve(z_nominal)
             if (
                 x is None
@@ -387,6 +396,24 @@ class SafetyFilter:
         return active, intervened, _Reports(self._names, worst, self._report_order, tolerance, slack)
 
     # -- solvers ------------------------------------------------------------------------------------
+
+    def _project_one_row(self, row: int, z_nominal: np.ndarray) -> np.ndarray | None:
+        """The exact solution when only ``row`` is violated at the clipped nominal, or None for OSQP.
+
+        It is the QP's solution if the projection onto the bounds and that one row meets every other row
+        and the row's multiplier stays within its slack penalty (so the penalised problem would not
+        take slack either); otherwise OSQP solves the whole problem.
+        """
+        norm = self._row_norm[row]
+        solution = project_onto_box_and_halfspace(
+            z_nominal, self._G[row] / norm, self._h[row] / norm, self._lb, self._ub
+        )
+        if solution is None or solution[1] > self._row_penalty[row]:
+            return None
+        z = solution[0]
+        excess = self._G @ z - self._h
+        excess[row] = 0.0  # the projected row holds with equality, up to rounding
+        return None if any_of(excess > 0.0) else z
 
     def _solve(self, z_nominal: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, str]:
         """Solve this tick's QP: without slack first, with it only when that does not settle it.
