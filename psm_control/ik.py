@@ -18,7 +18,6 @@ updated in place each call, unless the unconstrained minimiser already satisfies
 
 from __future__ import annotations
 
-import importlib
 import math
 import warnings
 from typing import Any
@@ -29,18 +28,15 @@ import pinocchio as pin
 import qpsolvers
 from scipy import sparse
 
+from psm_control.boxqp import FAILED, solve_box_qp
 from psm_control.errors import InfeasibleProblemError
-from psm_control.reductions import all_of, any_of
+from psm_control.reductions import all_of
 from psm_control.robot import PsmConfiguration
 
 __all__ = ["DifferentialIk", "IkResult", "KeptOsqp"]
 
 _SOLVED = ("solved", "solved inaccurate")
 _INFINITY = 1e30  # OSQP_INFTY: bounds beyond it are infinite
-# np.linalg.solve's own kernel: the same LAPACK call and result, without the wrapper's type checks and
-# error-state context (a third of the IK's Python time). A 6x6 damped Gram matrix is never singular; a
-# non-finite result goes through np.linalg.solve itself, which raises or returns exactly as it always did.
-_SOLVE1: Any = getattr(importlib.import_module("numpy.linalg._umath_linalg"), "solve1", None) or np.linalg.solve
 _STATUS = {int(v): k.removeprefix("OSQP_").lower().replace("_", " ") for k, v in osqp.SolverStatus.__members__.items()}
 
 
@@ -270,12 +266,10 @@ class DifferentialIk:
                 )
             dq, status = solution.x, str(solution.extras["info"].status)
         else:
-            # A convex QP's unconstrained minimiser is its solution when it satisfies the bounds: the
-            # common case of a small step, solved by one 6x6 linear solve instead of an ADMM run.
-            dq = _SOLVE1(P, b)
-            if not math.isfinite(dq @ dq):
-                dq = np.linalg.solve(P, b)
-            if any_of(dq < lower) or any_of(dq > upper):
+            # Solved exactly and directly in the common cases: the unconstrained minimiser within the
+            # bounds, or a few joints held at a bound (psm_control.boxqp); OSQP takes any other case.
+            dq = np.empty(self.dof)
+            if solve_box_qp(P, b, lower, upper, dq) == FAILED:
                 dq, _, status, _ = self._qp.solve(
                     -b, np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY), Px=P[self._Px_index]
                 )

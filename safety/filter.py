@@ -33,6 +33,7 @@ from scipy import sparse
 from psm_control.errors import InfeasibleProblemError
 from psm_control.ik import KeptOsqp
 from psm_control.reductions import all_of, any_of
+from safety.filter_kernels import assess, clip_and_count_violations, merge_bounds, normalise_rows
 from safety.halfspace import project_onto_box_and_halfspace
 from safety.limits import FilterState, Limit, LimitReport
 
@@ -40,8 +41,6 @@ __all__ = ["FilterResult", "SafetyFilter"]
 
 _INFINITY = 1e30  # OSQP's OSQP_INFTY: bounds beyond it are infinite
 _SOLVED = ("solved", "solved inaccurate")
-_MIN_ROW_NORM = 1e-9
-_NONE = np.zeros(0, dtype=np.intp)
 
 
 class _Reports:
@@ -153,7 +152,8 @@ class SafetyFilter:
         #: Rows of every limit together (as before the bound limits were merged); kept for callers.
         self.m_limits = sum(limit.rows for limit in self.limits)
         rows_per_limit = [self.limits[i].rows for i in self._rowed]
-        self._row_starts = np.cumsum([0, *rows_per_limit[:-1]]).astype(np.intp)
+        # First row of each limit that keeps rows (none when every limit bounds joints).
+        self._row_starts = np.cumsum([0, *rows_per_limit[:-1]]).astype(np.intp)[: len(rows_per_limit)]
         self._row_owner = np.repeat(np.arange(len(self._rowed)), rows_per_limit).astype(np.intp)
         slack_column = {limit: k for k, limit in enumerate(self._soft)}
         self._row_slack = np.array([slack_column.get(self._rowed[int(r)], -1) for r in self._row_owner], dtype=np.intp)
@@ -201,14 +201,10 @@ class SafetyFilter:
         self._iterations = 0
         self._names = tuple(limit.name for limit in self.limits)
         self._report_order = np.argsort(np.array(self._bound + self._rowed, dtype=np.intp))
-        self._any_hard_row = bool(self._hard_row.any())
         self._no_slack = np.zeros(len(self.limits))
         self._bound_limits = [(k, self.limits[i]) for k, i in enumerate(self._bound)]
         self._row_limits = [(self._slices[i], self.limits[i]) for i in self._rowed]
         self._n_bound = len(self._bound)
-        self._pair = np.zeros((2, 1, dof))  # [dq, dq_nominal], broadcast against the (bound limits, dof) bounds
-        self._excess = np.zeros((2, self.m_rows))  # [G z - h, G z_nominal - h]
-        self._flags = np.zeros((2, len(self.limits)), dtype=bool)  # [active, intervened] per column
         self._report_tolerance = 1e3 * hard_tolerance
         self._rows = np.zeros((self.m_rows, dof))
         # Bit of each column of the (bound limits, then the others) order: limit i is bit i.
@@ -261,24 +257,15 @@ class SafetyFilter:
         lower, upper = self._bound_lower, self._bound_upper
         for k, limit in self._bound_limits:
             lower[k], upper[k] = limit.compute_joint_bounds(state)
-        lb = np.maximum.reduce(lower, axis=0)
-        lb /= self._scale
-        ub = np.minimum.reduce(upper, axis=0)
-        ub /= self._scale
-        if not all_of(lb <= ub + self.hard_tolerance):
-            raise InfeasibleProblemError("safety_filter", f"joint bounds conflict: lower {lb} above upper {ub}")
-        self._lb = lb
-        self._ub = np.maximum(ub, lb, out=ub)
+        if not merge_bounds(lower, upper, self._scale, self.hard_tolerance, self._lb, self._ub):
+            raise InfeasibleProblemError(
+                "safety_filter", f"joint bounds conflict: lower {self._lb} above upper {self._ub}"
+            )
         if self.m_rows:
             G, h = self._G, self._h
             for rows, limit in self._row_limits:
                 G[rows], h[rows] = limit.compute_qp_inequalities(state)
-            G *= self._scale
-            # sqrt is monotonic, so the largest row norm per limit is the root of the largest square.
-            squares = np.einsum("ij,ij->i", G, G)
-            norm = np.sqrt(np.maximum.reduceat(squares, self._row_starts))
-            self._norm = np.maximum(norm, _MIN_ROW_NORM, out=norm)
-            self._row_norm = norm[self._row_owner]
+            normalise_rows(G, self._scale, self._row_starts, self._norm, self._row_norm)
 
     def problem(self, state: FilterState, dq_nominal: np.ndarray) -> qpsolvers.Problem:
         """The filter's QP for this tick as an inspectable ``qpsolvers.Problem`` (merged bounds as lb/ub)."""
@@ -310,18 +297,18 @@ class SafetyFilter:
         dq_nominal = np.asarray(dq_nominal, dtype=float)
         self._stack(state)
         z_nominal = dq_nominal / self._scale
-        z = np.minimum(np.maximum(z_nominal, self._lb), self._ub)
+        z = np.empty(self.dof)
+        violated, first_violated = clip_and_count_violations(z_nominal, self._lb, self._ub, self._G, self._h, z)
         sigma = self._zero_slack
         solved = False
         self._iterations = 0
-        violated = np.flatnonzero(self._G @ z > self._h) if self.m_rows else _NONE
         projected = None
-        if violated.size == 1 and not self.naive:
-            projected = self._project_one_row(int(violated[0]), z_nominal)
+        if violated == 1 and not self.naive:
+            projected = self._project_one_row(first_violated, z_nominal)
         if projected is not None:
             z = projected
             solved = True
-        elif self.naive or violated.size:
+        elif self.naive or violated:
             x, slack, status = self._solve(z_nominal)
             if (
                 x is None
@@ -362,38 +349,31 @@ class SafetyFilter:
 
         Returns the active and intervened bit masks (limit ``i`` is bit ``i``) and the reports' data.
         """
-        # Row 0 for the filtered step, row 1 for the nominal one, both at once; columns are the bound
-        # limits, then the others.
         worst = np.empty((2, len(self.limits)))
-        n_bound = self._n_bound
-        if n_bound:
-            pair = self._pair
-            pair[0, 0] = dq
-            pair[1, 0] = dq_nominal
-            beyond = np.maximum(pair - self._bound_upper, self._bound_lower - pair)  # (2, bound limits, dof)
-            np.maximum.reduce(beyond, axis=2, out=worst[:, :n_bound])
-            if np.maximum.reduce(worst[0, :n_bound]) > self.hard_tolerance:
-                raise InfeasibleProblemError("safety_filter", "a joint bound is violated after the clip")
+        bound_excess, hard_excess, active, intervened = assess(
+            self._bound_lower,
+            self._bound_upper,
+            dq,
+            dq_nominal,
+            self._G,
+            self._h,
+            z,
+            z_nominal,
+            self._row_starts,
+            self._hard_row,
+            self._bit_values,
+            self._report_tolerance,
+            worst,
+        )
+        if bound_excess > self.hard_tolerance:
+            raise InfeasibleProblemError("safety_filter", "a joint bound is violated after the clip")
+        if hard_excess > self.hard_tolerance:
+            raise InfeasibleProblemError("safety_filter", f"hard limit violated by {hard_excess:.3g} after the solve")
         slack = self._no_slack
-        if self.m_rows:
-            excess = self._excess
-            np.matmul(self._G, z, out=excess[0])
-            np.matmul(self._G, z_nominal, out=excess[1])
-            excess -= self._h
-            if self._any_hard_row:
-                hard = float(excess[0][self._hard_row].max())
-                if hard > self.hard_tolerance:
-                    raise InfeasibleProblemError("safety_filter", f"hard limit violated by {hard:.3g} after the solve")
-            np.maximum.reduceat(excess, self._row_starts, axis=1, out=worst[:, n_bound:])
-            if sigma is not self._zero_slack and sigma.any():
-                slack = np.zeros(len(self.limits))
-                slack[self._soft] = sigma * self._norm[self._soft_of_rowed]
-        flags = self._flags
-        tolerance = self._report_tolerance
-        np.greater_equal(worst[0], -tolerance, out=flags[0])
-        np.greater(worst[1], tolerance, out=flags[1])
-        active, intervened = (flags @ self._bit_values).tolist()
-        return active, intervened, _Reports(self._names, worst, self._report_order, tolerance, slack)
+        if sigma is not self._zero_slack and sigma.any():
+            slack = np.zeros(len(self.limits))
+            slack[self._soft] = sigma * self._norm[self._soft_of_rowed]
+        return active, intervened, _Reports(self._names, worst, self._report_order, self._report_tolerance, slack)
 
     # -- solvers ------------------------------------------------------------------------------------
 
@@ -405,12 +385,12 @@ class SafetyFilter:
         take slack either); otherwise OSQP solves the whole problem.
         """
         norm = self._row_norm[row]
-        solution = project_onto_box_and_halfspace(
-            z_nominal, self._G[row] / norm, self._h[row] / norm, self._lb, self._ub
+        z = np.empty(self.dof)
+        multiplier = project_onto_box_and_halfspace(
+            z_nominal, self._G[row] / norm, self._h[row] / norm, self._lb, self._ub, z
         )
-        if solution is None or solution[1] > self._row_penalty[row]:
+        if not multiplier <= self._row_penalty[row]:  # also NaN: infeasible
             return None
-        z = solution[0]
         excess = self._G @ z - self._h
         excess[row] = 0.0  # the projected row holds with equality, up to rounding
         return None if any_of(excess > 0.0) else z

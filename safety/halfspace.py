@@ -9,21 +9,24 @@ chosen so that ``a . z(lam) = b``. ``a . z(lam)`` is continuous, non-increasing 
 values of ``lam`` where a coordinate leaves or reaches a bound, so ``lam`` is found exactly by walking
 those breakpoints in order and solving within the one segment where the row is met. OSQP reaches the
 same point only to its tolerance, takes tens to thousands of iterations when the active row changes
-between ticks, and costs more per call than this whole function; the filter uses OSQP for everything
-this does not cover.
+between ticks, and costs more per call than this whole function (compiled with Numba: a few dozen
+floating-point operations, where NumPy's per-call overhead would dominate); the filter uses OSQP for
+everything this does not cover.
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 __all__ = ["project_onto_box_and_halfspace"]
 
 
+@numba.njit(cache=True)
 def project_onto_box_and_halfspace(
-    point: np.ndarray, normal: np.ndarray, offset: float, lower: np.ndarray, upper: np.ndarray
-) -> tuple[np.ndarray, float] | None:
-    """The point of ``{lower <= z <= upper, normal . z <= offset}`` closest to ``point``, and the row's multiplier.
+    point: np.ndarray, normal: np.ndarray, offset: float, lower: np.ndarray, upper: np.ndarray, z: np.ndarray
+) -> float:
+    """Write into ``z`` the point of ``{lower <= z <= upper, normal . z <= offset}`` closest to ``point``.
 
     Args:
         point: The point to project (n,).
@@ -31,54 +34,72 @@ def project_onto_box_and_halfspace(
         offset: Its offset ``b``.
         lower: Lower bounds (n,), ``-inf`` allowed.
         upper: Upper bounds (n,), ``inf`` allowed, ``upper >= lower``.
+        z: Output (n,).
 
     Returns:
-        ``(z, lam)``, or None when no point of the box meets the half-space (or an input is NaN).
+        The row's multiplier ``lam >= 0``, or NaN when no point of the box meets the half-space (or an
+        input is NaN); ``z`` is then meaningless.
     """
-    z = np.minimum(np.maximum(point, lower), upper)
-    value = float(normal @ z)
+    n = point.size
+    value = 0.0
+    for j in range(n):
+        z[j] = min(max(point[j], lower[j]), upper[j])
+        value += normal[j] * z[j]
     if value <= offset:
-        return z, 0.0
+        return 0.0
     if not value > offset:  # NaN
-        return None
+        return np.nan
     # Walk lam upwards through the events where a coordinate starts or stops moving (leaves or reaches
     # a bound); between events a . z(lam) falls with slope -sum(a_j^2) over the moving coordinates. The
     # slope is summed afresh from the moving set at every event, so rounding cannot leave a stopped
-    # coordinate's share behind. A handful of coordinates: plain floats are several times quicker
-    # than NumPy's small-array calls here.
-    squares: dict[int, float] = {}
-    moving: set[int] = set()
-    events: list[tuple[float, int, bool]] = []  # (lam, coordinate, starts moving)
-    for j, (p, a, lo, hi) in enumerate(
-        zip(point.tolist(), normal.tolist(), lower.tolist(), upper.tolist(), strict=True)
-    ):
+    # coordinate's share behind.
+    at = np.empty(2 * n)
+    coordinate = np.empty(2 * n, dtype=np.int64)
+    starts = np.empty(2 * n, dtype=np.bool_)
+    moving = np.zeros(n, dtype=np.bool_)
+    count = 0
+    for j in range(n):
+        a = normal[j]
         if a == 0.0:
             continue
-        start, stop = ((p - hi) / a, (p - lo) / a) if a > 0.0 else ((p - lo) / a, (p - hi) / a)
+        if a > 0.0:
+            start, stop = (point[j] - upper[j]) / a, (point[j] - lower[j]) / a
+        else:
+            start, stop = (point[j] - lower[j]) / a, (point[j] - upper[j]) / a
         if not stop > 0.0:
             continue  # already at the bound it moves towards (or NaN): it never moves
-        squares[j] = a * a
         if start > 0.0:
-            events.append((start, j, True))
+            at[count], coordinate[count], starts[count] = start, j, True
+            count += 1
         else:
-            moving.add(j)
-        events.append((stop, j, False))
-    events.sort()
-    slope = -sum(squares[j] for j in moving)
+            moving[j] = True
+        at[count], coordinate[count], starts[count] = stop, j, False
+        count += 1
+    order = np.argsort(at[:count], kind="mergesort")
+    slope = 0.0
+    for j in range(n):
+        if moving[j]:
+            slope -= normal[j] * normal[j]
     lam = 0.0
-    for at, j, starts in events:
+    for e in order:
         if slope < 0.0:
-            reached = value + slope * (at - lam)
+            reached = value + slope * (at[e] - lam)
             if reached <= offset:
                 break
             value = reached
-        lam = at
-        if starts:
-            moving.add(j)
-        else:
-            moving.discard(j)
-        slope = -sum(squares[k] for k in moving)
+        lam = at[e]
+        moving[coordinate[e]] = starts[e]
+        slope = 0.0
+        for j in range(n):
+            if moving[j]:
+                slope -= normal[j] * normal[j]
     if not slope < 0.0:
-        return None  # every coordinate is at its bound and the row is still violated: infeasible
+        return np.nan  # every coordinate is at its bound and the row is still violated: infeasible
     multiplier = lam + (value - offset) / -slope
-    return np.minimum(np.maximum(point - multiplier * normal, lower), upper), multiplier
+    for j in range(n):
+        z[j] = min(max(point[j] - multiplier * normal[j], lower[j]), upper[j])
+    return multiplier
+
+
+# Compile (or load from Numba's cache) now, at import, so that no control tick waits for the compiler.
+project_onto_box_and_halfspace(np.zeros(2), np.ones(2), 0.0, -np.ones(2), np.ones(2), np.zeros(2))

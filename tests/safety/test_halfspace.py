@@ -5,8 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import qpsolvers
+from scipy import sparse
 
 from safety.halfspace import project_onto_box_and_halfspace
+
+
+def _project(
+    point: np.ndarray, normal: np.ndarray, offset: float, lower: np.ndarray, upper: np.ndarray
+) -> tuple[np.ndarray, float] | None:
+    z = np.full(point.size, np.nan)
+    lam = project_onto_box_and_halfspace(point, normal, offset, lower, upper, z)
+    return None if np.isnan(lam) else (z, lam)
 
 
 def _instance(rng: np.random.Generator, n: int = 6) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
@@ -26,8 +35,10 @@ def test_the_projection_meets_the_kkt_conditions() -> None:
     solved = infeasible = 0
     for _ in range(5000):
         point, normal, offset, lower, upper = _instance(rng)
-        result = project_onto_box_and_halfspace(point, normal, offset, lower, upper)
-        least = float(np.sum(np.where(normal > 0, normal * lower, normal * upper)[normal != 0]))
+        result = _project(point, normal, offset, lower, upper)
+        involved = normal != 0
+        lowest = np.where(normal > 0, lower, upper)[involved]
+        least = float(np.sum(normal[involved] * lowest))  # the row's smallest value over the box
         if result is None:
             assert least > offset - 1e-12  # no point of the box meets the row
             infeasible += 1
@@ -42,15 +53,18 @@ def test_the_projection_meets_the_kkt_conditions() -> None:
     assert solved > 3000 and infeasible > 50
 
 
+# qpsolvers calls OSQP's solve() without raise_error, which OSQP warns about on every call.
+@pytest.mark.filterwarnings("ignore::PendingDeprecationWarning")
 def test_the_projection_matches_osqp_solved_tightly() -> None:
     rng = np.random.default_rng(11)
     for _ in range(200):
         point, normal, offset, lower, upper = _instance(rng)
-        result = project_onto_box_and_halfspace(point, normal, offset, lower, upper)
+        result = _project(point, normal, offset, lower, upper)
         if result is None:
             continue
         reference = qpsolvers.solve_qp(
-            np.eye(6), -point, normal[None, :], np.array([offset]), lb=lower, ub=upper,
+            sparse.eye(6, format="csc"), -point, sparse.csc_matrix(normal[None, :]), np.array([offset]),
+            lb=lower, ub=upper,
             solver="osqp", eps_abs=1e-10, eps_rel=1e-10, max_iter=200_000, polishing=True, verbose=False,
         )  # fmt: skip
         assert reference is not None
@@ -64,5 +78,5 @@ def test_nan_gives_none_or_a_finite_answer_never_nan(bad: str) -> None:
         point[2] = np.nan
     else:
         normal[2] = np.nan
-    result = project_onto_box_and_halfspace(point, normal, 0.0, -np.ones(6), np.ones(6))
+    result = _project(point, normal, 0.0, -np.ones(6), np.ones(6))
     assert result is None or np.all(np.isfinite(result[0]))
