@@ -11,9 +11,11 @@ is expressed. The policy only commands position and yaw, so the goal orientation
 turned about the target frame's z axis, and orientation is weighted well below position: a radian of
 orientation error costs as much as ``orientation_weight`` metres of position error.
 
-The problem is built as a ``qpsolvers.Problem`` (inspectable, and carried by the error when it fails)
-and solved by an OSQP workspace kept between ticks (:class:`KeptOsqp`, shared with the safety filter),
-updated in place each call, unless the unconstrained minimiser already satisfies the bounds.
+The problem can be built as a ``qpsolvers.Problem`` (inspectable, and carried by the error when it
+fails). Each step is solved exactly by :func:`psm_control.boxqp.solve_box_qp` (the unconstrained
+minimiser, or an active set of joints held at their bounds, checked against the KKT conditions); any
+problem it does not settle goes to an OSQP workspace kept between ticks (:class:`KeptOsqp`, shared
+with the safety filter) and updated in place.
 """
 
 from __future__ import annotations

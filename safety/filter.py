@@ -14,7 +14,10 @@ and the penalty ``rho`` needs to exceed only the (bounded) multiplier of a unit 
 
 The problem keeps one size and sparsity pattern, so one OSQP workspace is set up once and only
 ``update()``d each tick. A nominal command whose clip to the bounds already meets every other row is
-returned without a solve (the bounds are a box and the cost is separable, so the clip is optimal). After
+returned without a solve (the bounds are a box and the cost is separable, so the clip is optimal). When
+the clip violates exactly one row, the projection onto the bounds and that row is computed exactly
+(:mod:`safety.halfspace`) and kept if it meets every other row within the row's slack penalty; OSQP
+solves every other case. The per-tick arithmetic is in :mod:`safety.filter_kernels`. After
 a solve ``z`` is clipped to the bounds (exact, whatever the solver's tolerance) and every hard row is
 re-checked: a violation above the tolerance raises, never passes.
 """
