@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from psm_control.errors import TissueRetractError
 
-__all__ = ["CheckpointError", "DemonstrationError", "SpaceMismatchError"]
+__all__ = ["CheckpointError", "DemonstrationError", "ReproductionError", "SpaceMismatchError"]
 
 
 class CheckpointError(TissueRetractError):
@@ -46,3 +46,19 @@ class SpaceMismatchError(CheckpointError):
 
 class DemonstrationError(TissueRetractError):
     """Demonstrations could not be obtained or do not fit the task's spaces."""
+
+
+class ReproductionError(TissueRetractError):
+    """Some runs of a reproduction failed; every other run was finished and kept.
+
+    Attributes:
+        failures: ``(run name, error message)`` per failed run.
+    """
+
+    def __init__(self, failures: list[tuple[str, str]]) -> None:
+        self.failures = failures
+        listed = "; ".join(f"{name}: {message}" for name, message in failures)
+        super().__init__(
+            f"{len(failures)} run(s) failed ({listed}); the other runs finished and are kept, and running "
+            "the same command again retrains only the failed and unfinished ones"
+        )

@@ -10,11 +10,12 @@ success rate (mean over seeds, 95 % t-interval) beside the paper's, and learning
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 import multiprocessing
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from policies.config import ALGORITHMS, TrainConfig
+from policies.errors import ReproductionError
 
 __all__ = [
     "OUTCOME_FILE",
@@ -193,12 +195,33 @@ def _read_curve(path: Path) -> list[tuple[int, float]]:
 
 
 def run_all(runs: Iterable[Run], jobs: int = 1) -> list[RunOutcome]:
-    """Train every run, ``jobs`` processes at a time (each process uses one torch thread)."""
+    """Train every run, ``jobs`` processes at a time (each process uses one torch thread).
+
+    Raises:
+        ReproductionError: After every run has ended, naming the runs that failed.
+    """
     runs = list(runs)
+    outcomes: list[RunOutcome] = []
+    failures: list[tuple[str, str]] = []
+
+    def collect(run: Run, result: Callable[[], RunOutcome]) -> None:
+        # One failed run must not cost the others: hours of training may be under way beside it.
+        try:
+            outcomes.append(result())
+        except Exception as e:
+            failures.append((run.out_dir.name, f"{type(e).__name__}: {e}"))
+
     if jobs <= 1:
-        return [_execute(run) for run in runs]
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return list(pool.map(_execute, runs))
+        for run in runs:
+            collect(run, functools.partial(_execute, run))
+    else:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(_execute, run) for run in runs]
+            for run, future in zip(runs, futures, strict=True):
+                collect(run, future.result)
+    if failures:
+        raise ReproductionError(failures)
+    return outcomes
 
 
 def _mean_ci(values: Sequence[float]) -> tuple[float, float]:

@@ -165,11 +165,12 @@ class _Logger:
 
     def __init__(self, out_dir: Path, tensorboard: bool) -> None:
         self.csv_path = out_dir / "eval.csv"
-        new = not self.csv_path.exists()
         self.csv_file = self.csv_path.open("a", newline="")
         self.csv = csv.writer(self.csv_file)
-        if new:
+        # Also when the file is there but empty: a run stopped before its first evaluation leaves it so.
+        if self.csv_file.tell() == 0:
             self.csv.writerow(["episode", "env_steps", "updates", "success_rate", "train_steps_per_s"])
+            self.csv_file.flush()
         self.writer: Any = None
         if tensorboard:
             from torch.utils.tensorboard import SummaryWriter

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import pickle
 import struct
@@ -143,6 +144,18 @@ def test_interrupted_run_resumes_to_the_same_result(algo: str, tmp_path: Path) -
             assert torch.equal(a.tensors[key], b.tensors[key]), key
     rows = (tmp_path / "split" / "eval.csv").read_text().splitlines()
     assert [r.split(",")[0] for r in rows] == ["episode", "2", "4"]
+
+
+def test_a_run_stopped_before_its_first_evaluation_still_gets_a_csv_header(tmp_path: Path) -> None:
+    """Stopped before anything was flushed, a run leaves an empty eval.csv; the rerun must head it."""
+    (tmp_path / "eval.csv").touch()
+    spec = RunSpec(
+        TOY_TASK_ID, seed=1, episodes=2, demos=0, out_dir=tmp_path, eval_every=2, eval_episodes=1,
+        progress=False, tensorboard=False,
+    )  # fmt: skip
+    train(spec, TrainConfig(**SMALL))  # type: ignore[arg-type]
+    rows = list(csv.DictReader((tmp_path / "eval.csv").open()))
+    assert [row["episode"] for row in rows] == ["2"]
 
 
 def test_resume_refuses_a_different_run(tmp_path: Path) -> None:

@@ -5,6 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
+from policies.errors import ReproductionError
 from policies.reproduce import OUTCOME_FILE, PAPER_TABLE1, Run, RunOutcome, plan, reproduce, tables
 from policies.toy_env import TOY_TASK_ID
 
@@ -61,3 +64,18 @@ def test_reproduce_reads_finished_runs_instead_of_training_them_again(tmp_path: 
     _, again = reproduce(tmp_path, runs, jobs=1)
     assert policy.stat().st_mtime_ns == written
     assert again[0].wall_seconds == first[0].wall_seconds and again[0].curve == first[0].curve
+
+
+def test_a_failed_run_does_not_stop_the_others(tmp_path: Path) -> None:
+    """Every other run still finishes and keeps its outcome; the error names the failed run afterwards."""
+    runs = plan(
+        tmp_path, episodes=2, tasks={"toy": TOY_TASK_ID}, algos=("ddpg",), seeds=(1, 2, 3), demos=0,
+        eval_every=1, eval_episodes=1, overrides=TINY,
+    )  # fmt: skip
+    broken = runs[0].out_dir
+    broken.mkdir(parents=True)
+    (broken / OUTCOME_FILE).write_text("{ not json")
+    with pytest.raises(ReproductionError, match=broken.name) as raised:
+        reproduce(tmp_path, runs, jobs=2)
+    assert [name for name, _ in raised.value.failures] == [broken.name]
+    assert all((run.out_dir / OUTCOME_FILE).exists() for run in runs[1:])
