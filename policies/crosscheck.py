@@ -10,8 +10,12 @@ Matched: 3 x 128 ReLU actor and critic, gamma 0.99, learning rate 1e-3, tau 0.00
 0.1, HER ``future`` with k = 4 (relabel probability 0.8 in both).
 Not matched, because SB3's DDPG has no such option: our running normalisation of observations and goals
 (clip 5), our clipping of the target Q to [-1/(1-gamma), 0] and our actor's action penalty mean(a^2).
-No ``VecNormalize`` is added: SB3 sees the raw observations. SB3's ``MultiInputPolicy`` also feeds the
-networks all three dict entries (``achieved_goal`` too); ours feeds ``observation`` and ``desired_goal``.
+By default SB3 sees the raw observations; ``--normalize`` wraps its env in ``VecNormalize`` (running
+mean and standard deviation of every observation entry, clipped to +-5 like ours, rewards untouched),
+which takes the largest of these differences out of the comparison. SB3's replay buffer then keeps raw
+observations and normalises sampled batches, so HER's relabelled rewards are computed on raw goals.
+SB3's ``MultiInputPolicy`` also feeds the networks all three dict entries (``achieved_goal`` too); ours
+feeds ``observation`` and ``desired_goal``.
 
 Run as ``python -m policies.crosscheck --episodes 300 --seed 1 --out runs/crosscheck/sb3``. Needs the
 ``dev`` extra (``pip install -e .[dev]``), which brings stable-baselines3.
@@ -42,6 +46,7 @@ def crosscheck_sb3(
     learning_starts: int = 1000,
     gradient_steps: int = 40,
     out: str | Path | None = None,
+    normalize: bool = False,
 ) -> dict[str, Any]:
     """Train SB3 DDPG+HER on Task I for ``episodes`` episodes and evaluate it with our evaluation.
 
@@ -52,7 +57,9 @@ def crosscheck_sb3(
         eval_seed: Evaluation seed, as ``tissue-retract evaluate --seeds``.
         learning_starts: Uniformly random env steps before learning (1,000 = ours).
         gradient_steps: Gradient steps after each episode (40 = ours).
-        out: If given, the SB3 model (``sb3_ddpg_her.zip``) and ``result.json`` are written there.
+        out: If given, the SB3 model (``sb3_ddpg_her.zip``), ``result.json`` and, with ``normalize``,
+            the normalisation statistics (``vecnormalize.pkl``) are written there.
+        normalize: Normalise SB3's observations with ``VecNormalize`` (clip 5), frozen for evaluation.
 
     Returns:
         ``successes``, ``eval_episodes``, ``success_rate``, ``ci95`` (Wilson, low/high),
@@ -70,6 +77,7 @@ def crosscheck_sb3(
         from stable_baselines3 import DDPG, HerReplayBuffer
         from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
         from stable_baselines3.common.noise import NormalActionNoise
+        from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
     except ImportError as e:
         raise ConfigurationError(
             "stable_baselines3", None, "stable-baselines3 installed: pip install -e .[dev] (the dev extra)"
@@ -91,24 +99,36 @@ def crosscheck_sb3(
         replay_buffer_kwargs=dict(goal_selection_strategy="future", n_sampled_goal=4),
         policy_kwargs=dict(net_arch=dict(pi=[128, 128, 128], qf=[128, 128, 128])),
         action_noise_sigma=0.1,
+        normalize=normalize,
     )
     env = sim.envs.make(TASK_ID)
     action_dim = int(env.action_space.shape[0])
-    sb3_kwargs = {k: v for k, v in settings.items() if k != "action_noise_sigma"}
+    normalizer = None
+    if normalize:
+        normalizer = VecNormalize(DummyVecEnv([lambda: env]), norm_obs=True, norm_reward=False, clip_obs=5.0)
+    sb3_kwargs = {k: v for k, v in settings.items() if k not in ("action_noise_sigma", "normalize")}
     noise = NormalActionNoise(np.zeros(action_dim), settings["action_noise_sigma"] * np.ones(action_dim))
     model = DDPG(
-        "MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, action_noise=noise, seed=seed, **sb3_kwargs
+        "MultiInputPolicy",
+        normalizer if normalizer is not None else env,
+        replay_buffer_class=HerReplayBuffer,
+        action_noise=noise,
+        seed=seed,
+        **sb3_kwargs,
     )
     start = time.perf_counter()
     model.learn(total_timesteps=episodes * MAX_EPISODE_STEPS, callback=StopTrainingOnMaxEpisodes(episodes, verbose=0))
     train_wall_s = time.perf_counter() - start
+    if normalizer is not None:
+        normalizer.training = False  # evaluation must neither update nor depend on its own statistics
     env.close()
 
     eval_env = sim.envs.make(TASK_ID)
     try:
 
         def policy(observation: dict[str, np.ndarray]) -> np.ndarray:
-            action, _ = model.predict(observation, deterministic=True)
+            seen = normalizer.normalize_obs(observation) if normalizer is not None else observation
+            action, _ = model.predict(seen, deterministic=True)
             return np.asarray(action)
 
         start = time.perf_counter()
@@ -138,6 +158,8 @@ def crosscheck_sb3(
         directory.mkdir(parents=True, exist_ok=True)
         model.save(directory / "sb3_ddpg_her.zip")
         (directory / "result.json").write_text(json.dumps(result, indent=2))
+        if normalizer is not None:
+            normalizer.save(str(directory / "vecnormalize.pkl"))
     return result
 
 
@@ -149,13 +171,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--eval-episodes", type=int, default=50, help="evaluation episodes (default: 50)")
     parser.add_argument("--eval-seed", type=int, default=1, help="evaluation seed (default: 1)")
     parser.add_argument("--out", default=None, help="directory for the SB3 model and result.json")
+    parser.add_argument("--normalize", action="store_true", help="normalise SB3's observations (VecNormalize)")
     args = parser.parse_args(argv)
     import torch
 
     torch.set_num_threads(1)
-    r = crosscheck_sb3(args.episodes, args.seed, args.eval_episodes, args.eval_seed, out=args.out)
+    r = crosscheck_sb3(
+        args.episodes, args.seed, args.eval_episodes, args.eval_seed, out=args.out, normalize=args.normalize
+    )
     low, high = r["ci95"]
-    print(f"SB3 DDPG+HER on {TASK_ID}, seed {r['seed']}, {r['train_episodes']} training episodes")
+    inputs = "VecNormalize" if args.normalize else "raw observations"
+    print(f"SB3 DDPG+HER on {TASK_ID}, seed {r['seed']}, {r['train_episodes']} training episodes, {inputs}")
     print(f"{'metric':<28}{'value':>22}")
     print(f"{'success (eval)':<28}{r['successes']:>10}/{r['eval_episodes']} = {r['success_rate']:.2f}")
     print(f"{'95 % Wilson interval':<28}{f'[{low:.2f}, {high:.2f}]':>22}")

@@ -42,6 +42,23 @@ def test_smoke_run_trains_for_the_budget_and_returns_a_scored_result(tmp_path: P
     assert json.loads((tmp_path / "result.json").read_text())["successes"] == result["successes"]
 
 
+def test_normalized_run_learns_its_statistics_from_training_and_saves_them(tmp_path: Path) -> None:
+    """With VecNormalize the statistics count every training step and are written beside the model."""
+    import pickle
+
+    result = crosscheck_sb3(
+        episodes=2, seed=0, eval_episodes=1, learning_starts=50, gradient_steps=2, out=tmp_path, normalize=True
+    )
+    assert result["settings"]["normalize"] is True
+    with (tmp_path / "vecnormalize.pkl").open("rb") as f:
+        stats = pickle.load(f)  # written by this test's own run
+    assert stats.training is False
+    for key in ("observation", "desired_goal", "achieved_goal"):
+        # One count per env step (the first reset adds one more); evaluation must not have added any.
+        assert 100 <= stats.obs_rms[key].count <= 102
+        assert float(stats.obs_rms[key].var.max()) > 0.0
+
+
 def test_a_non_positive_budget_is_refused() -> None:
     """Zero training or evaluation episodes raise a ConfigurationError naming the field."""
     with pytest.raises(ConfigurationError, match="episodes"):
