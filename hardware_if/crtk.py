@@ -81,7 +81,7 @@ _ARM_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 def periodic_qos() -> Any:
     """QoS of the dVRK's periodic topics (state and motion commands): depth 5, reliable, volatile."""
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # the ros extra
 
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
@@ -93,7 +93,7 @@ def periodic_qos() -> Any:
 
 def event_qos() -> Any:
     """QoS of the dVRK's event topics (operating_state, error, ...): depth 100, transient-local."""
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # the ros extra
 
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,

@@ -29,10 +29,16 @@ from typing import Any
 
 import numpy as np
 
+import sim.envs
 from hardware_if.recording import Recorder
+from hardware_if.session import ros_session
+from policies.resolve import resolve_policy
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from psm_control.errors import ConfigurationError
+from safety.chain import ControlChain
 from safety.config import SafetyConfig
+from sim.evaluation import run_episode
+from sim.scene import PhysicsParams
 
 __all__ = ["EXIT_HOLD", "DeployOptions", "DeployReport", "deploy"]
 
@@ -218,13 +224,9 @@ class _RecordingChain:
 
 
 def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder, echo: Any) -> None:
-    import sim.envs
-    from sim.evaluation import resolve_policy, run_episode
 
     overrides: dict[str, Any] = {"safety_config": options.safety_config}
     if options.rate_hz is not None:
-        from sim.scene import PhysicsParams
-
         overrides["physics"] = PhysicsParams(control_period_s=1.0 / options.rate_hz)
     env = sim.envs.make(options.task, **overrides)
     try:
@@ -258,11 +260,9 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
 
 # -- dVRK over ROS 2 ---------------------------------------------------------------------------------
 def _deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder, echo: Any) -> None:
+    # These import rclpy (the ros extra), which must come after the ROS environment is set.
     from hardware_if.psm_client import PsmClient
     from hardware_if.remote_task import RemoteTask, TaskListener
-    from hardware_if.session import ros_session
-    from safety.chain import ControlChain
-    from sim.evaluation import resolve_policy
 
     rate_hz = options.rate_hz if options.rate_hz is not None else 100.0
     base = options.safety_config if options.safety_config is not None else SafetyConfig()
@@ -325,7 +325,6 @@ def _dvrk_episode(
     episode: int,
     seed: int,
 ) -> dict[str, Any]:
-    import sim.envs
 
     cfg = view.config
     steps_total = sim.envs.MAX_EPISODE_STEPS

@@ -27,6 +27,8 @@ from types import TracebackType
 from typing import Any
 
 import numpy as np
+from mcap.reader import make_reader
+from mcap.writer import Writer
 
 __all__ = ["CHANNELS", "Recorder", "read_recording"]
 
@@ -63,8 +65,6 @@ class Recorder:
     """
 
     def __init__(self, path: str | Path) -> None:
-        from mcap.writer import Writer
-
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = self.path.open("wb")
@@ -111,8 +111,6 @@ class Recorder:
 
 def read_recording(path: str | Path) -> Iterator[tuple[str, float, dict[str, Any]]]:
     """Yield ``(topic, log_time_s, payload)`` of every message of a recording, in log-time order."""
-    from mcap.reader import make_reader
-
     with Path(path).open("rb") as f:
         reader = make_reader(f)
         for _, channel, message in reader.iter_messages(log_time_order=True):

@@ -24,6 +24,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import Bool, Int64  # type: ignore[import-untyped]
 
+import sim.envs
 from hardware_if.crtk import periodic_qos
 from hardware_if.errors import DvrkTimeoutError
 from hardware_if.psm_client import PsmClient
@@ -134,8 +135,6 @@ class RemoteTask:
     """
 
     def __init__(self, task: str, client: PsmClient, listener: TaskListener) -> None:
-        import sim.envs
-
         env = sim.envs.make(task)
         try:
             self.observation_space = env.observation_space

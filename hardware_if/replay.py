@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from hardware_if.crtk import JOINT_NAMES
 from hardware_if.recording import read_recording
@@ -151,12 +152,8 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
 
 def plot_recording(rec: Recording, out: str | Path) -> Path:
     """Joint commands against measurements, and the force, over time; written to ``out`` (PNG)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, axes = plt.subplots(4, 2, figsize=(12, 11), sharex=True)
+    figure = Figure(figsize=(12, 11))
+    axes = figure.subplots(4, 2, sharex=True)
     for i, name in enumerate(JOINT_NAMES):
         ax = axes.flat[i]
         if len(rec.command_q):
@@ -189,5 +186,4 @@ def plot_recording(rec: Recording, out: str | Path) -> Path:
     path = Path(out)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=80)
-    plt.close(figure)
     return path

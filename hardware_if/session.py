@@ -17,7 +17,7 @@ __all__ = ["require_ros", "ros_session"]
 
 def require_ros() -> Any:
     """Import and return rclpy, or raise :class:`RosNotAvailableError` naming the fix."""
-    try:
+    try:  # the ros extra: optional, and read by Fast DDS at import, after the ROS environment is set
         import rclpy
         from crtk_msgs.msg import OperatingState  # type: ignore[import-untyped]  # noqa: F401
     except ImportError as e:
@@ -41,7 +41,7 @@ def ros_session(args: list[str] | None = None, *, signal_handlers: bool = True) 
     if signal_handlers:
         rclpy.init(args=args)
     else:
-        from rclpy.signals import SignalHandlerOptions
+        from rclpy.signals import SignalHandlerOptions  # the ros extra, as above
 
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:

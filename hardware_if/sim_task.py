@@ -18,8 +18,12 @@ from typing import Any
 
 import numpy as np
 
+import sim.envs
 from hardware_if.arm_model import ArmSample
+from hardware_if.crtk import periodic_qos
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
+from safety.config import SafetyConfig
+from sim.scene import PhysicsParams
 
 __all__ = ["TASK_PHYSICS_PERIOD_S", "TASK_TOPICS", "SetpointFollower", "TaskArm", "TaskTopics", "task_arm_model"]
 
@@ -52,8 +56,6 @@ class SetpointFollower:
     """
 
     def __init__(self, control_period_s: float, q: np.ndarray, jaw: float) -> None:
-        from safety.config import SafetyConfig
-
         self.control_period_s = control_period_s
         self.config = SafetyConfig()
         self.log: list[object] = []
@@ -85,9 +87,6 @@ class TaskArm:
     instantaneous = False
 
     def __init__(self, task: str, *, seed: int = 0, max_steps_per_call: int = 6) -> None:
-        import sim.envs
-        from sim.scene import PhysicsParams
-
         physics = PhysicsParams(substeps=2, control_period_s=TASK_PHYSICS_PERIOD_S)
         self.env: Any = sim.envs.make(task, physics=physics).unwrapped
         self.task = task
@@ -179,10 +178,9 @@ class TaskTopics:
     """
 
     def __init__(self, node: Any, arm_model: TaskArm) -> None:
+        # The ros extra: message types, needed only when the scene is served over ROS 2.
         from geometry_msgs.msg import PointStamped  # type: ignore[import-untyped]
         from std_msgs.msg import Bool, Int64  # type: ignore[import-untyped]
-
-        from hardware_if.crtk import periodic_qos
 
         self.node, self.arm_model = node, arm_model
         self._point = PointStamped
@@ -203,7 +201,7 @@ class TaskTopics:
         self.node.get_logger().info(f"task scene reset (seed {int(message.data)})")
 
     def _publish(self) -> None:
-        from hardware_if import convert
+        from hardware_if import convert  # the ros extra (message types), as above
 
         state = self.arm_model.task_state()
         stamp = convert.seconds_to_time(float(self.node.get_clock().now().nanoseconds) * 1e-9)

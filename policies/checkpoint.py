@@ -38,6 +38,7 @@ from safetensors.torch import save_file
 from policies.algos import AGENTS, Agent, Dims, make_agent
 from policies.config import TrainConfig
 from policies.errors import CheckpointError, SpaceMismatchError
+from psm_control import __version__
 
 __all__ = [
     "FORMAT",
@@ -156,7 +157,6 @@ def save_checkpoint(
         arrays: Extra arrays by tensor name (replay buffers), training checkpoints only.
         rng: JSON-ready random generator states, training checkpoints only.
     """
-    from psm_control import __version__
 
     tensors: dict[str, torch.Tensor] = {}
     modules = agent.modules() if training else {"actor": agent.actor}

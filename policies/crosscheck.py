@@ -30,8 +30,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
+import sim.envs
 from psm_control.errors import ConfigurationError
+from sim.envs import MAX_EPISODE_STEPS
+from sim.evaluation import FAILURE_CLASSES, run_episode
+from sim.sweep import wilson_interval
 
 __all__ = ["TASK_ID", "crosscheck_sb3", "main"]
 
@@ -73,7 +78,7 @@ def crosscheck_sb3(
     for name, value in (("episodes", episodes), ("eval_episodes", eval_episodes)):
         if value < 1:
             raise ConfigurationError(name, value, "a positive number of episodes")
-    try:
+    try:  # the dev extra: optional, so imported only for the cross-check
         from stable_baselines3 import DDPG, HerReplayBuffer
         from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
         from stable_baselines3.common.noise import NormalActionNoise
@@ -82,10 +87,6 @@ def crosscheck_sb3(
         raise ConfigurationError(
             "stable_baselines3", None, "stable-baselines3 installed: pip install -e .[dev] (the dev extra)"
         ) from e
-    import sim.envs
-    from sim.envs import MAX_EPISODE_STEPS
-    from sim.evaluation import FAILURE_CLASSES, run_episode
-    from sim.sweep import wilson_interval
 
     settings: dict[str, Any] = dict(
         learning_rate=1e-3,
@@ -173,7 +174,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=None, help="directory for the SB3 model and result.json")
     parser.add_argument("--normalize", action="store_true", help="normalise SB3's observations (VecNormalize)")
     args = parser.parse_args(argv)
-    import torch
 
     torch.set_num_threads(1)
     r = crosscheck_sb3(

@@ -28,6 +28,7 @@ import numpy as np
 from policies.buffers import Episode
 from policies.errors import DemonstrationError
 from policies.toy_env import TOY_TASK_ID, toy_expert
+from sim.expert import ScriptedExpert
 
 __all__ = ["Controller", "ExpertFactory", "collect_demos", "expert_for", "load_demos", "rollout"]
 
@@ -94,10 +95,6 @@ def expert_for(task_id: str) -> ExpertFactory:
     if task_id == TOY_TASK_ID:
         return lambda env: _FunctionController(env, toy_expert)
     if task_id.startswith("TissueRetract-"):
-        try:
-            from sim.expert import ScriptedExpert
-        except ImportError as e:
-            raise DemonstrationError(f"the simulation's scripted expert is not available: {e}") from e
         return ScriptedExpert
     raise DemonstrationError(
         f"no scripted expert is known for {task_id!r}: write demonstrations to a file "

@@ -14,6 +14,7 @@ import functools
 import json
 import math
 import multiprocessing
+import subprocess
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -22,9 +23,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from policies.config import ALGORITHMS, TrainConfig
 from policies.errors import ReproductionError
+from policies.trainer import RunSpec, train
 
 __all__ = [
     "OUTCOME_FILE",
@@ -122,8 +125,6 @@ OUTCOME_FILE = "outcome.json"
 
 def _execute(run: Run) -> RunOutcome:
     """Train one run (in a worker process); returns its outcome. A finished run is read, not retrained."""
-    from policies.trainer import RunSpec, train
-
     finished = _read_outcome(run)
     if finished is not None:
         return finished
@@ -172,8 +173,6 @@ def _read_outcome(run: Run) -> RunOutcome | None:
 
 def _commit() -> str:
     """The git commit of the code that ran, or "" outside a checkout."""
-    import subprocess
-
     try:
         out = subprocess.run(
             ["git", "rev-parse", "--short", "HEAD"],
@@ -273,13 +272,9 @@ def tables(outcomes: Sequence[RunOutcome], demos: int = 100) -> str:
 
 def plot_curves(outcomes: Sequence[RunOutcome], path: Path, demos: int = 100) -> Path:
     """One panel per task: mean evaluation success over seeds against training episodes, per algorithm."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     tasks = list(dict.fromkeys(o.run.task for o in outcomes))
-    fig, axes = plt.subplots(1, len(tasks), figsize=(4.5 * len(tasks), 3.5), squeeze=False)
+    fig = Figure(figsize=(4.5 * len(tasks), 3.5))
+    axes = fig.subplots(1, len(tasks), squeeze=False)
     for ax, task in zip(axes[0], tasks, strict=True):
         for algo in ALGORITHMS:
             curves = [o.curve for o in outcomes if o.run.task == task and o.run.algo == algo and o.run.demos == demos]
@@ -298,7 +293,6 @@ def plot_curves(outcomes: Sequence[RunOutcome], path: Path, demos: int = 100) ->
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
-    plt.close(fig)
     return path
 
 

@@ -22,6 +22,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
 
 from policies.algos import Agent, Dims, make_agent
 from policies.buffers import Episode, EpisodeBuffer, RewardFn
@@ -173,8 +175,6 @@ class _Logger:
             self.csv_file.flush()
         self.writer: Any = None
         if tensorboard:
-            from torch.utils.tensorboard import SummaryWriter
-
             self.writer = SummaryWriter(str(out_dir / "tb"))
 
     def scalars(self, values: dict[str, float], step: int) -> None:
@@ -245,8 +245,6 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
     logger = _Logger(out, spec.tensorboard)
     bar = None
     if spec.progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=spec.episodes, initial=start_episode, desc=f"{config.algo} {spec.task_id}", unit="ep")
 
     def checkpoint(episode: int) -> None:

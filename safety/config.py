@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from psm_control.errors import ConfigurationError, UnknownVariantError
 from psm_control.spec import PsmSpec, psm_spec
@@ -315,8 +316,6 @@ def load_safety_config(path: str | Path) -> SafetyConfig:
         except tomllib.TOMLDecodeError as e:
             raise ConfigurationError("config", str(path), f"valid TOML ({e})") from e
     elif suffix in (".yaml", ".yml"):
-        import yaml
-
         try:
             data = yaml.safe_load(text) or {}
         except yaml.YAMLError as e:

@@ -14,7 +14,6 @@ chain's stopped ticks and the constraints that changed a command (once per const
 
 from __future__ import annotations
 
-import importlib
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -24,7 +23,7 @@ import numpy as np
 
 from psm_control.errors import ConfigurationError
 
-__all__ = ["FAILURE_CLASSES", "EpisodeResult", "Policy", "resolve_policy", "run_episode", "summarize"]
+__all__ = ["FAILURE_CLASSES", "EpisodeResult", "Policy", "run_episode", "summarize"]
 
 FAILURE_CLASSES = ("none", "improper_grasp", "grip_loss", "tissue_damage", "safety_stop", "timeout", "sim_unstable")
 _SEVERITY = ("sim_unstable", "safety_stop", "tissue_damage", "grip_loss", "improper_grasp")
@@ -55,45 +54,6 @@ class EpisodeResult:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
         return asdict(self)
-
-
-def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
-    """A policy and its per-episode reset from ``scripted``, ``random``, ``pretrained`` (the shipped policy
-    of the env's task), ``module:callable`` or a checkpoint path.
-
-    ``module:callable`` names a function of the observation dict, or a class built with the environment
-    (``cls(env)``, as :class:`sim.pulling.AggressivePull`); a ``reset()`` method is called per episode.
-
-    Raises:
-        ConfigurationError: The policy cannot be found.
-        CheckpointError: The checkpoint file is not a valid checkpoint or does not fit the environment.
-    """
-    if spec == "scripted":
-        from sim.expert import ScriptedExpert
-
-        expert = ScriptedExpert(env)
-        return expert, expert.reset
-    if spec == "random":
-        return (lambda _obs: env.action_space.sample()), (lambda: None)
-    if spec == "pretrained":
-        from policies.shipped import shipped_policy_path
-
-        spec = str(shipped_policy_path(env.spec.id if env.spec is not None else type(env.unwrapped).__name__))
-    if ":" in spec and not spec.endswith((".pt", ".safetensors", ".zip")):
-        module_name, _, attribute = spec.partition(":")
-        try:
-            target = getattr(importlib.import_module(module_name), attribute)
-        except (ImportError, AttributeError) as e:
-            raise ConfigurationError("policy", spec, "an importable module:callable") from e
-        if isinstance(target, type):  # a policy class is built with the environment, as ScriptedExpert(env)
-            target = target(env)
-        reset = getattr(target, "reset", None)
-        return target, (reset if callable(reset) else (lambda: None))
-    from policies.checkpoint import load_policy
-
-    policy = load_policy(spec, env)
-    reset = getattr(policy, "reset", None)
-    return policy, (reset if callable(reset) else (lambda: None))
 
 
 def run_episode(

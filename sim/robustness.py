@@ -4,17 +4,16 @@ A sweep parameter is either a randomization parameter of the simulation (passed 
 ``reset(options=...)``; multipliers of ``x`` ranges apply to the middle of its default range) or a
 disturbance in the manner of safe-control-gym (white noise, an impulse or a step on the observation
 or the action, and action latency). Short names stand for the common ones (``stiffness``, ``size``,
-``obs_noise``, ``latency``...). :func:`robustness_episode` is the sweep worker: it runs in a worker
-process, keeps its environment and policy between trials, and returns one JSON-ready outcome.
+``obs_noise``, ``latency``...). This module turns a trial's parameters into ``reset`` options and
+disturbances; running the trial with a policy is the sweep worker's job.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from typing import Any
 
 from psm_control.errors import ConfigurationError
-from sim.disturbances import Disturbance, DisturbanceWrapper
+from sim.disturbances import Disturbance
 from sim.randomization import DEFAULT_RANGES, INTEGER_PARAMETERS
 from sim.sweep.space import ParameterRange
 
@@ -22,8 +21,8 @@ __all__ = [
     "ALIASES",
     "DISTURBANCE_PARAMETERS",
     "check_relative_ranges",
+    "disturbances",
     "episode_options",
-    "robustness_episode",
     "sweep_parameters",
 ]
 
@@ -94,7 +93,7 @@ def episode_options(params: Mapping[str, float], relative: Mapping[str, bool]) -
     return options
 
 
-def _disturbances(params: Mapping[str, float]) -> tuple[tuple[Disturbance, ...], tuple[Disturbance, ...]]:
+def disturbances(params: Mapping[str, float]) -> tuple[tuple[Disturbance, ...], tuple[Disturbance, ...]]:
     """The observation and action disturbances a trial's parameters ask for."""
 
     def make(prefix: str, unit: str) -> tuple[Disturbance, ...]:
@@ -108,60 +107,3 @@ def _disturbances(params: Mapping[str, float]) -> tuple[tuple[Disturbance, ...],
         return tuple(made)
 
     return make("obs", "_m"), make("action", "")
-
-
-_CACHE: dict[tuple[Any, ...], Any] = {}
-
-
-def _environment(task: str, safety: bool, safety_config: Mapping[str, Any] | None) -> Any:
-    key = ("env", task, safety, tuple(sorted((safety_config or {}).items())))
-    if key not in _CACHE:
-        from sim.envs import make
-
-        kwargs: dict[str, Any] = {"safety": safety}
-        if safety_config:
-            from safety.config import SafetyConfig
-
-            kwargs["safety_config"] = SafetyConfig(**dict(safety_config))
-        for old in [k for k in _CACHE if k[0] == "env"]:
-            _CACHE.pop(old).close()  # one environment (one physics client) per worker process
-        _CACHE[key] = make(task, **kwargs)
-    return _CACHE[key]
-
-
-def robustness_episode(
-    trial: Mapping[str, Any],
-    *,
-    policy: str,
-    task: str,
-    relative: Mapping[str, bool],
-    safety: bool = True,
-    safety_config: Mapping[str, Any] | None = None,
-) -> dict[str, Any]:
-    """Run one trial of a sweep and return its outcome (the worker of :func:`sim.sweep.run_trials`).
-
-    Args:
-        trial: ``{"index", "seed", "params"}``.
-        policy: ``scripted``, ``random``, ``module:callable`` or a checkpoint path.
-        task: Task id.
-        relative: Which parameters are multipliers of their nominal value.
-        safety: Run the safety filter (False only for ablations).
-        safety_config: Keyword overrides of :class:`safety.config.SafetyConfig` for this sweep.
-    """
-    from sim.evaluation import resolve_policy, run_episode
-
-    params = {str(k): float(v) for k, v in trial["params"].items()}
-    env = _environment(task, safety, safety_config)
-    policy_key = ("policy", policy, id(env))
-    if policy_key not in _CACHE:
-        _CACHE[policy_key] = resolve_policy(policy, env)
-    policy_fn, policy_reset = _CACHE[policy_key]
-    observation_disturbances, action_disturbances = _disturbances(params)
-    wrapped = DisturbanceWrapper(env, observation=observation_disturbances, action=action_disturbances)
-    options = episode_options(params, relative)
-    result = run_episode(wrapped, policy_fn, policy_reset, int(trial["seed"]), options=options)
-    outcome = result.to_dict()
-    outcome.pop("seed", None)
-    outcome["interventions"] = {"total": int(result.interventions)}
-    outcome["options"] = options
-    return outcome

@@ -10,11 +10,14 @@ force stays under the user's bound (ties go to the lower force).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import yaml
 
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig
@@ -23,11 +26,11 @@ from sim.sweep.stats import wilson_interval
 
 __all__ = [
     "SettingResult",
+    "integer_settings",
     "pareto_front",
     "recommend",
     "setting_results",
     "tunable_fields",
-    "tuning_episode",
     "tuning_trials",
     "write_config",
 ]
@@ -55,8 +58,6 @@ def tuning_trials(ranges: Sequence[ParameterRange], levels: int, episodes: int, 
 
     Relative ranges (``x``) multiply the default configuration's value.
     """
-    import itertools
-
     if episodes < 1:
         raise ConfigurationError("episodes", episodes, "an integer >= 1")
     if levels < 1:
@@ -64,7 +65,7 @@ def tuning_trials(ranges: Sequence[ParameterRange], levels: int, episodes: int, 
     axes = [[v * _base_value(r.name) if r.relative else v for v in r.levels(levels)] for r in ranges]
     settings = [dict(zip((r.name for r in ranges), combo, strict=True)) for combo in itertools.product(*axes)]
     for setting in settings:
-        SafetyConfig.from_mapping(_integers(setting))  # refuse an invalid setting before any episode runs
+        SafetyConfig.from_mapping(integer_settings(setting))  # refuse an invalid setting before any episode runs
     return [
         Trial(i * episodes + j, (seed * 1_000_003 + j) % 2**31, setting)
         for i, setting in enumerate(settings)
@@ -72,23 +73,13 @@ def tuning_trials(ranges: Sequence[ParameterRange], levels: int, episodes: int, 
     ]
 
 
-def _integers(setting: Mapping[str, float]) -> dict[str, Any]:
+def integer_settings(setting: Mapping[str, float]) -> dict[str, Any]:
     """Grid values as the config wants them: integer settings (solver_max_iter) rounded."""
     default = SafetyConfig()
     return {
         k: round(v) if isinstance(getattr(default, k), int) and not isinstance(getattr(default, k), bool) else float(v)
         for k, v in setting.items()
     }
-
-
-def tuning_episode(
-    trial: Mapping[str, Any], *, policy: str, task: str, base_config: Mapping[str, Any] | None = None
-) -> dict[str, Any]:
-    """Sweep worker: one episode of the policy under the trial's safety settings."""
-    from sim.robustness import robustness_episode
-
-    overrides = {**dict(base_config or {}), **_integers(trial["params"])}
-    return robustness_episode({**trial, "params": {}}, policy=policy, task=task, relative={}, safety_config=overrides)
 
 
 @dataclass(frozen=True)
@@ -164,9 +155,7 @@ def write_config(
     path: Path, setting: Mapping[str, float], base_config: Mapping[str, Any] | None, note: str
 ) -> SafetyConfig:
     """Write the recommended SafetyConfig as YAML (only the settings that differ from the defaults)."""
-    import yaml
-
-    config = SafetyConfig.from_mapping({**dict(base_config or {}), **_integers(setting)})
+    config = SafetyConfig.from_mapping({**dict(base_config or {}), **integer_settings(setting)})
     defaults = SafetyConfig().to_dict()
     changed = {k: list(v) if isinstance(v, tuple) else v for k, v in config.to_dict().items() if v != defaults[k]}
     path.parent.mkdir(parents=True, exist_ok=True)

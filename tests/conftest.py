@@ -32,5 +32,5 @@ def random_joints(model: PsmModel, rng: np.random.Generator, count: int) -> np.n
 def run_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
     """Run ``tissue-retract ARGS`` as a user would, in a fresh interpreter, capturing its output."""
     return subprocess.run(
-        [sys.executable, "-m", "psm_control", *args], capture_output=True, text=True, timeout=timeout, check=False
+        [sys.executable, "-m", "tissue_retract", *args], capture_output=True, text=True, timeout=timeout, check=False
     )

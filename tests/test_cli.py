@@ -7,9 +7,9 @@ import sys
 
 import pytest
 
-from psm_control.cli import SUBCOMMANDS
-from psm_control.cli.bench import TARGETS
 from tests.conftest import run_cli
+from tissue_retract.cli import SUBCOMMANDS
+from tissue_retract.cli.bench import TARGETS
 
 PROMISED = ("demo", "train", "evaluate", "deploy", "robustness", "tune-safety", "sim-dvrk", "replay", "bench", "safety")
 
@@ -36,7 +36,7 @@ def test_version() -> None:
 def test_every_subcommand_has_help_without_extras(command: list[str]) -> None:
     """Every subcommand answers --help, with no ROS 2 or Ray imported to do so."""
     code = (
-        "import sys; from psm_control.cli import main\n"
+        "import sys; from tissue_retract.cli import main\n"
         f"try:\n    main({[*command, '--help']!r})\nexcept SystemExit as e:\n    assert e.code == 0, e.code\n"
         "assert 'rclpy' not in sys.modules and 'ray' not in sys.modules, 'imported an extra'"
     )

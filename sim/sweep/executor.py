@@ -118,7 +118,7 @@ def _run_ray(
     progress: tqdm,
 ) -> None:
     try:
-        import ray
+        import ray  # the dist extra: optional, so imported only when this backend is chosen
     except ImportError as e:
         raise SweepError("the ray backend needs the 'dist' extra: pip install 'tissue-retract[dist]'") from e
     started_here = False

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from sim.sweep.space import ParameterRange
 from sim.sweep.stats import binned_success, wilson_interval
@@ -44,13 +45,9 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 def _plot_success(records: Sequence[dict[str, Any]], parameter: ParameterRange, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     stats = [b for b in binned_success(records, parameter.name, relative=parameter.relative) if b.episodes]
-    figure, axis = plt.subplots(figsize=(5.5, 3.5), dpi=110)
+    figure = Figure(figsize=(5.5, 3.5), dpi=110)
+    axis = figure.subplots()
     centres = [math.sqrt(b.low * b.high) if parameter.relative and b.low > 0 else (b.low + b.high) / 2 for b in stats]
     rates = [100 * b.success_rate for b in stats]
     errors = [[100 * (b.success_rate - b.ci_low) for b in stats], [100 * (b.ci_high - b.success_rate) for b in stats]]
@@ -63,17 +60,12 @@ def _plot_success(records: Sequence[dict[str, Any]], parameter: ParameterRange, 
     axis.grid(alpha=0.3)
     figure.tight_layout()
     figure.savefig(path)
-    plt.close(figure)
 
 
 def _plot_forces(records: Sequence[dict[str, Any]], path: Path, force_limit_n: float | None) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     forces = [float(r["peak_force_n"]) for r in records if r.get("peak_force_n") is not None and "error" not in r]
-    figure, axis = plt.subplots(figsize=(5.5, 3.5), dpi=110)
+    figure = Figure(figsize=(5.5, 3.5), dpi=110)
+    axis = figure.subplots()
     axis.hist(forces or [0.0], bins=20, color="tab:orange", edgecolor="black")
     if force_limit_n is not None:
         axis.axvline(force_limit_n, color="red", linestyle="--", label=f"force limit {force_limit_n:g} N")
@@ -83,7 +75,6 @@ def _plot_forces(records: Sequence[dict[str, Any]], path: Path, force_limit_n: f
     axis.grid(alpha=0.3)
     figure.tight_layout()
     figure.savefig(path)
-    plt.close(figure)
 
 
 def write_report(

@@ -15,7 +15,7 @@ from policies.checkpoint import load_checkpoint, load_policy
 from policies.config import ALGORITHMS, TrainConfig
 from policies.toy_env import TOY_TASK_ID
 from policies.trainer import RunSpec, train
-from psm_control.cli import main
+from tissue_retract.cli import main
 
 
 def _simulation_tasks() -> list[str]:
@@ -63,7 +63,7 @@ def test_train_command_line(tmp_path: Path) -> None:
     base = [
         sys.executable,
         "-m",
-        "psm_control",
+        "tissue_retract",
         "train",
         "--task",
         TOY_TASK_ID,

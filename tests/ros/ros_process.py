@@ -13,7 +13,7 @@ SIM_BASE_XYZ = (0.1, -0.2, 0.3)
 
 def start_sim_dvrk(env: dict[str, str], *extra: str) -> subprocess.Popen[str]:
     """Start ``sim-dvrk`` on this test run's domain (from ``env``) with a non-trivial base frame."""
-    command = [sys.executable, "-m", "psm_control", "sim-dvrk", "--domain-id", env["ROS_DOMAIN_ID"]]
+    command = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--domain-id", env["ROS_DOMAIN_ID"]]
     command += ["--base-xyz", *(str(v) for v in SIM_BASE_XYZ), *extra]
     return subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 

@@ -33,7 +33,7 @@ EPISODES = 3
 
 
 def _deploy(env: dict[str, str], record: Path, *extra: str) -> subprocess.Popen[str]:
-    command = [sys.executable, "-m", "psm_control", "deploy", "--policy", "scripted", "--target", "dvrk"]
+    command = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", "scripted", "--target", "dvrk"]
     command += ["--task", "lift", "--seed", SEED, "--domain-id", env["ROS_DOMAIN_ID"], "--record", str(record)]
     command += ["--wait", "60", *extra]
     return subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -78,7 +78,7 @@ def test_replay_prints_summary_and_plot(lift_run: tuple[int, str, Path], tmp_pat
     _, _, record = lift_run
     plot = tmp_path / "run.png"
     done = subprocess.run(
-        [sys.executable, "-m", "psm_control", "replay", str(record), "--plot", str(plot)],
+        [sys.executable, "-m", "tissue_retract", "replay", str(record), "--plot", str(plot)],
         capture_output=True,
         text=True,
         timeout=120,

@@ -10,7 +10,12 @@ from pathlib import Path
 
 def _cli(env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "psm_control", *args], env=env, capture_output=True, text=True, timeout=300, check=False
+        [sys.executable, "-m", "tissue_retract", *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
     )
 
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from psm_control import boxqp
-from psm_control.cli import bench_chain
 from psm_control.commands import CartesianDelta, MeasuredState
 from safety import filter_kernels, halfspace
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
+from tissue_retract.cli import bench_chain
 
 KERNELS = (
     boxqp.solve_box_qp,

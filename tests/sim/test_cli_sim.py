@@ -12,7 +12,7 @@ import numpy as np
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "psm_control", *args], capture_output=True, text=True, timeout=300, check=False
+        [sys.executable, "-m", "tissue_retract", *args], capture_output=True, text=True, timeout=300, check=False
     )
 
 

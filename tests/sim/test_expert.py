@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from sim.evaluation import FAILURE_CLASSES, resolve_policy, run_episode, summarize
+from policies.resolve import resolve_policy
+from sim.evaluation import FAILURE_CLASSES, run_episode, summarize
 from tests.sim.conftest import make_env
 
 

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from policies.resolve import resolve_policy
 from safety.config import SafetyConfig
-from sim.evaluation import resolve_policy, run_episode, summarize
+from sim.evaluation import run_episode, summarize
 from tests.sim.conftest import make_env
 
 # Well inside the flap's grip capacity (friction 0.45-0.6 x 4 N pinch): unfiltered pulls exceed it.

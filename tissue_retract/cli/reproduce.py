@@ -10,21 +10,18 @@ seeds with a 95 % interval, beside the paper's) and ``curves.png`` to ``--out``.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
-__all__ = ["add_parser", "run"]
+from policies.config import ALGORITHMS
+from policies.reproduce import TASKS, plan, reproduce
+from psm_control.errors import UnknownVariantError
+
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    from policies.config import ALGORITHMS
-
-    parser = subparsers.add_parser(
-        "reproduce",
-        help="train and evaluate the paper's Tables 1 and 2",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     parser.add_argument("--budget", type=int, default=1000, help="training episodes per run (default 1000)")
     parser.add_argument("--jobs", type=int, default=None, help="parallel training processes (default: all cores)")
     parser.add_argument("--out", type=Path, default=Path("runs/reproduce"), help="output folder")
@@ -35,17 +32,10 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument("--no-ablation", action="store_true", help="skip Table 2's 25 and 50 demonstrations")
     parser.add_argument("--eval-every", type=int, default=50, help="episodes between evaluations (default 50)")
     parser.add_argument("--eval-episodes", type=int, default=50, help="episodes per evaluation (default 50)")
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Plan the runs, train them in parallel, write the tables and curves."""
-    import os
-
-    from policies.config import ALGORITHMS
-    from policies.reproduce import TASKS, plan, reproduce
-    from psm_control.errors import UnknownVariantError
-
     tasks = [t.strip().upper() for t in args.tasks.split(",") if t.strip()]
     for task in tasks:
         if task not in TASKS:

@@ -29,16 +29,16 @@ import sys
 import time
 from pathlib import Path
 
-from hardware_if.network import environment_domain_id
+from hardware_if.deploy import DeployOptions, deploy
+from hardware_if.network import apply_local_ros_env, environment_domain_id
+from psm_control.errors import ConfigurationError
+from safety.config import load_safety_config
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser(
-        "deploy", help="deploy a policy to the simulation or a dVRK over ROS 2", description=__doc__
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
     parser.add_argument("--target", required=True, choices=("sim", "dvrk"), help="simulation or a dVRK over ROS 2")
     parser.add_argument("--task", default="lift", help="task id: lift, target, multisite, expose (default: lift)")
@@ -60,29 +60,20 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         action="store_true",
         help="dvrk only, not with --dry-run: keep your ROS discovery settings instead of localhost-only",
     )
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Deploy, print the report, return 0, 4 (hold) or 130 (Ctrl-C)."""
-    from psm_control.errors import ConfigurationError
-
     if args.network and args.dry_run:
         raise ConfigurationError("--network", True, "not with --dry-run: dry runs stay on localhost")
     if args.target == "dvrk":
-        from hardware_if.network import apply_local_ros_env
-
         if args.network:
             os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
         else:
             apply_local_ros_env(args.domain_id)  # before rclpy starts
 
-    from hardware_if.deploy import DeployOptions, deploy
-
     safety_config = None
     if args.safety_config is not None:
-        from safety.config import load_safety_config
-
         safety_config = load_safety_config(args.safety_config)
     record = Path(args.record) if args.record else Path("runs") / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
     options = DeployOptions(

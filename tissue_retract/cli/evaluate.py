@@ -12,12 +12,20 @@ from __future__ import annotations
 import argparse
 import json
 
-__all__ = ["add_parser", "run"]
+from rich.console import Console
+from rich.table import Table
+
+import sim.envs
+from policies.resolve import resolve_policy
+from psm_control.errors import ConfigurationError
+from safety.config import load_safety_config
+from sim.evaluation import run_episode, summarize, timed
+
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser("evaluate", help="evaluate a policy on a task", description=__doc__)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
     parser.add_argument("--task", default="multisite", help="lift, target, multisite, expose (or 1-3, a Gym id)")
     parser.add_argument("--episodes", type=int, default=50, help="episodes per seed (default: 50)")
@@ -27,25 +35,14 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml), e.g. force_limit_n"
     )
     parser.add_argument("--json", metavar="FILE", default=None, help="write {summary, episodes} as JSON")
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate and print a table."""
-    from rich.console import Console
-    from rich.table import Table
-
-    import sim.envs
-    from sim.evaluation import resolve_policy, run_episode, summarize, timed
-
     if args.episodes < 1:
-        from psm_control.errors import ConfigurationError
-
         raise ConfigurationError("--episodes", args.episodes, "a positive number of episodes")
     safety_config = None
     if args.safety_config is not None:
-        from safety.config import load_safety_config
-
         safety_config = load_safety_config(args.safety_config)
     console = Console(width=110)
     if args.no_safety:

@@ -6,18 +6,19 @@ import argparse
 import json
 from typing import Any
 
+import imageio.v2 as imageio
 import numpy as np
+
+from psm_control import __version__
+from psm_control.errors import ConfigurationError
+from sim.envs import gym_id, make
+from sim.expert import ScriptedExpert
 
 __all__ = ["run_episodes"]
 
 
 def run_episodes(args: argparse.Namespace) -> int:
     """Run the expert, print one line per episode, and write demos and a video if asked."""
-    from psm_control import __version__
-    from psm_control.errors import ConfigurationError
-    from sim.envs import gym_id, make
-    from sim.expert import ScriptedExpert
-
     if args.episodes < 1:
         raise ConfigurationError("--episodes", args.episodes, "a positive number of episodes")
     env = make(args.task)
@@ -45,8 +46,6 @@ def run_episodes(args: argparse.Namespace) -> int:
         _save(args.out, kept, gym_id(args.task), args.task, __version__)
         print(f"wrote {len(kept)} demonstrations to {args.out}")
     if args.video:
-        import imageio.v2 as imageio
-
         timing: dict[str, Any] = {"duration": 50} if args.video.endswith(".gif") else {"fps": 20}
         imageio.mimsave(args.video, frames, **timing)
         print(f"wrote {len(frames)} frames to {args.video}")

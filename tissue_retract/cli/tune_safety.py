@@ -12,24 +12,31 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from psm_control.cli.robustness import add_sweep_arguments
+from matplotlib.figure import Figure
+from rich.console import Console
+from rich.table import Table
 
-if TYPE_CHECKING:
-    from sim.tuning import SettingResult
+from safety.config import SafetyConfig
+from sim.envs import gym_id
+from sim.sweep import EpisodeStore, parse_ranges, run_trials
+from sim.tuning import (
+    SettingResult,
+    pareto_front,
+    recommend,
+    setting_results,
+    tunable_fields,
+    tuning_trials,
+    write_config,
+)
+from tissue_retract.cli.robustness import add_sweep_arguments, safety_overrides
+from tissue_retract.workers import TUNING_WORKER
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser(
-        "tune-safety",
-        help="sweep safety limits and recommend a configuration",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     add_sweep_arguments(parser, "tune-safety")
     parser.add_argument(
         "--grid",
@@ -44,18 +51,13 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         default=None,
         help="peak-force bound for the recommendation [N] (default: the default force limit)",
     )
-    parser.set_defaults(func=run)
 
 
 def _plot(
     results: list[SettingResult], front: list[SettingResult], chosen: SettingResult | None, bound: float, path: Path
 ) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, axis = plt.subplots(figsize=(5.5, 3.8), dpi=110)
+    figure = Figure(figsize=(5.5, 3.8), dpi=110)
+    axis = figure.subplots()
     axis.scatter(
         [r.max_peak_force_n for r in results],
         [100 * r.success_rate for r in results],
@@ -87,20 +89,10 @@ def _plot(
     axis.legend(fontsize=8)
     figure.tight_layout()
     figure.savefig(path)
-    plt.close(figure)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write the table, plot and recommended configuration."""
-    from rich.console import Console
-    from rich.table import Table
-
-    from psm_control.cli.robustness import safety_overrides
-    from safety.config import SafetyConfig
-    from sim.envs import gym_id
-    from sim.sweep import EpisodeStore, parse_ranges, run_trials
-    from sim.tuning import pareto_front, recommend, setting_results, tunable_fields, tuning_trials, write_config
-
     task_id = gym_id(args.task)
     ranges = parse_ranges(args.grid, valid_names=tunable_fields())
     base = safety_overrides(args.safety_config) or {}
@@ -112,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     records = run_trials(
         trials,
-        "sim.tuning:tuning_episode",
+        TUNING_WORKER,
         store=EpisodeStore(out / "episodes.jsonl"),
         backend=args.backend,
         jobs=args.jobs,

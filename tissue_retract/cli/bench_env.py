@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
+
+from sim.envs import make
 
 __all__ = ["add_arguments", "run"]
 
@@ -38,10 +41,6 @@ def _rate(env: object, steps: int, render: bool) -> tuple[float, float, int]:
 
 def run(args: argparse.Namespace) -> int:
     """Measure and print."""
-    import os
-
-    from sim.envs import make
-
     env = make(args.task)
     try:
         physics = env.unwrapped.config.physics

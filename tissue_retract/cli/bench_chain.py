@@ -20,6 +20,12 @@ import os
 import time
 
 import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from psm_control.commands import CartesianDelta, MeasuredState
+from safety.chain import ControlChain
+from safety.config import SafetyConfig
 
 __all__ = ["add_arguments", "run"]
 
@@ -28,7 +34,7 @@ _FORCE_PERIOD_S = 0.05  # the tissue force is re-measured at the same rate
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the target's options (``--json`` is added by ``bench``)."""
+    """Add the target's options."""
     parser.add_argument("--ticks", type=int, default=10_000, help="ticks per chain (default: 10000, minimum 100)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the input sequence")
     parser.add_argument(
@@ -38,10 +44,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _run(naive: bool, ticks: int, seed: int, rate_hz: float = 1000.0) -> tuple[np.ndarray, np.ndarray, int]:
     """Return wall-clock and CPU time per tick [us] and the number of safety stops."""
-    from psm_control.commands import CartesianDelta, MeasuredState
-    from safety.chain import ControlChain
-    from safety.config import SafetyConfig
-
     config = SafetyConfig(control_rate_hz=rate_hz, deadman_timeout_s=max(0.05, 2.0 / rate_hz))
     chain = ControlChain(config, naive_qp=naive)
     rng = np.random.default_rng(seed)
@@ -77,9 +79,6 @@ def _run(naive: bool, ticks: int, seed: int, rate_hz: float = 1000.0) -> tuple[n
 
 def run(args: argparse.Namespace) -> int:
     """Run both chains and print p50/p99/max [us]."""
-    from rich.console import Console
-    from rich.table import Table
-
     ticks = max(int(args.ticks), 100)
     fast, fast_cpu, fast_stops = _run(False, ticks, args.seed, args.rate)
     naive, naive_cpu, naive_stops = _run(True, ticks, args.seed, args.rate)

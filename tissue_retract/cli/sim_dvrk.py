@@ -16,16 +16,17 @@ from __future__ import annotations
 
 import argparse
 
-from hardware_if.network import environment_domain_id
+import numpy as np
 
-__all__ = ["add_parser", "run"]
+from hardware_if.network import apply_local_ros_env, environment_domain_id
+from hardware_if.session import require_ros, ros_session
+from hardware_if.sim_task import TaskArm, TaskTopics
+
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser(
-        "sim-dvrk", help="serve the dVRK's CRTK topics from the simulation", description=__doc__
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     parser.add_argument("--arm", default="PSM1", help="arm name and topic namespace (default: PSM1)")
     parser.add_argument(
         "--task", default=None, metavar="ID", help="serve a task's tissue scene (force on body/measured_cf)"
@@ -43,25 +44,18 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         metavar=("X", "Y", "Z"),
         help="position of the RCM in <arm>_base [m], as set_base_frame would set it (default: 0 0 0)",
     )
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the simulated console until Ctrl-C."""
-    import numpy as np
-
-    from hardware_if.network import apply_local_ros_env
-
     # Read by rclpy and Fast DDS when they start, so set before the first import of rclpy.
     apply_local_ros_env(args.domain_id)
 
-    from hardware_if.session import require_ros, ros_session
-
     rclpy = require_ros()
+    # The ros extra, imported after the environment it reads is set.
     from rclpy.executors import ExternalShutdownException
 
     from hardware_if.sim_dvrk import SimulatedPsm
-    from hardware_if.sim_task import TaskArm, TaskTopics
 
     task = TaskArm(args.task, seed=args.seed) if args.task is not None else None
     base_frame = np.eye(4)

@@ -9,24 +9,23 @@ paper's; ``--set FIELD=VALUE`` overrides any field of :class:`policies.config.Tr
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shlex
 import sys
 from pathlib import Path
 
-__all__ = ["add_parser", "parse_overrides", "run"]
+from policies.config import TrainConfig
+from policies.trainer import RunSpec, ensure_registered, train
+from psm_control.errors import ConfigurationError
+
+__all__ = ["add_arguments", "parse_overrides", "run"]
 
 ALGOS = ("ddpg", "sqil", "ddpgbc", "col", "dex")
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser(
-        "train",
-        help="train a policy (DDPG+HER, SQIL, DDPGBC, CoL, DEX) on a task",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     parser.add_argument(
         "--task",
         required=True,
@@ -46,13 +45,10 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument("--fresh", action="store_true", help="ignore an existing checkpoint in --out and start over")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--no-tensorboard", action="store_true", help="no TensorBoard logs")
-    parser.set_defaults(func=run)
 
 
 def parse_overrides(items: list[str]) -> dict[str, object]:
     """``FIELD=VALUE`` pairs as a dict; values are JSON (``64``, ``[64,64]``, ``false``) or plain strings."""
-    from psm_control.errors import ConfigurationError
-
     out: dict[str, object] = {}
     for item in items:
         name, sep, raw = item.partition("=")
@@ -68,12 +64,6 @@ def parse_overrides(items: list[str]) -> dict[str, object]:
 
 def run(args: argparse.Namespace) -> int:
     """Train, print where the policy is, its last success rate and the throughput."""
-    import dataclasses
-
-    from policies.config import TrainConfig
-    from policies.trainer import RunSpec, ensure_registered, train
-    from psm_control.errors import ConfigurationError
-
     overrides = parse_overrides(args.set)
     known = {f.name for f in dataclasses.fields(TrainConfig)}
     for name in overrides:

@@ -9,21 +9,19 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["add_parser", "run"]
+from hardware_if.replay import load_recording, plot_recording, summarize_recording
+
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser("replay", help="summarise and plot a recorded run", description=__doc__)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     parser.add_argument("file", metavar="FILE", help="an .mcap recording written by deploy")
     parser.add_argument("--plot", metavar="PNG", default=None, help="write a plot of commands, measurements, force")
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the summary and write the plot."""
-    from hardware_if.replay import load_recording, plot_recording, summarize_recording
-
     recording = load_recording(args.file)
     for line in summarize_recording(recording).lines():
         print(line)

@@ -17,20 +17,22 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+import pybullet as p
+from rich.console import Console
+from rich.table import Table
 
+from psm_control.dh import dh_tool_pose
+from psm_control.robot import PsmModel
 from psm_control.spec import ARMS, TOOLS
+from psm_control.urdf import TOOL_TIP_FRAME
+from sim.psm_body import PsmBody
+from tissue_retract.cli._demos import run_episodes
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser(
-        "demo",
-        help="run scripted-expert episodes (record demos, video); --kinematics: the FK cross-check",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     parser.add_argument("--kinematics", action="store_true", help="print the kinematics cross-check instead")
     parser.add_argument("--arm", choices=ARMS, default="classic", help="PSM generation (default: classic)")
     parser.add_argument("--tool", choices=TOOLS, default=None, help="instrument (default: the arm's LND)")
@@ -39,7 +41,6 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument("--seed", type=int, default=0, help="first episode seed (default: 0)")
     parser.add_argument("--out", metavar="FILE", default=None, help="write successful episodes as .npz demos")
     parser.add_argument("--video", metavar="FILE", default=None, help="record the first episode (.gif or .mp4)")
-    parser.set_defaults(func=run)
 
 
 def _named_configurations(insertion: float) -> dict[str, np.ndarray]:
@@ -57,22 +58,12 @@ def run(args: argparse.Namespace) -> int:
     """Run expert episodes, or print the kinematics table with ``--kinematics``."""
     if args.kinematics:
         return run_kinematics(args)
-    from psm_control.cli._demos import run_episodes
 
     return run_episodes(args)
 
 
 def run_kinematics(args: argparse.Namespace) -> int:
     """Print the kinematics table."""
-    import pybullet as p
-    from rich.console import Console
-    from rich.table import Table
-
-    from psm_control.dh import dh_tool_pose
-    from psm_control.robot import PsmModel
-    from psm_control.urdf import TOOL_TIP_FRAME
-    from sim.psm_body import PsmBody
-
     model = PsmModel.from_variant(args.arm, args.tool)
     configuration = model.configuration()
     client = p.connect(p.DIRECT)

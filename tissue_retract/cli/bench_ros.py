@@ -17,6 +17,12 @@ import threading
 import time
 from typing import Any
 
+import numpy as np
+
+from hardware_if.network import apply_local_ros_env, run_domain_id
+from hardware_if.session import ros_session
+from psm_control.commands import JointCommand
+
 __all__ = ["add_arguments", "run"]
 
 _ROLL0 = -0.5
@@ -24,7 +30,7 @@ _ROLL_STEP = 1e-4
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of the ros target (``--json`` is added by ``bench``)."""
+    """Options of the ros target."""
     parser.add_argument(
         "--rates", type=float, nargs="+", default=[100.0, 1000.0], help="rates [Hz] (default: 100 1000)"
     )
@@ -32,10 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str, Any]:
-    import numpy as np
-
-    from hardware_if.psm_client import PsmClient
-    from psm_control.commands import JointCommand
+    from hardware_if.psm_client import PsmClient  # the ros extra: rclpy, after the ROS environment is set
 
     count = max(1, round(rate_hz * duration_s))
     sent = np.full(count, np.nan)
@@ -50,7 +53,7 @@ def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str,
             if 0 <= k < count and np.isnan(received[k]):
                 received[k] = rx_s
 
-    command = [sys.executable, "-m", "psm_control", "sim-dvrk", "--rate", f"{rate_hz:g}"]
+    command = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--rate", f"{rate_hz:g}"]
     command += ["--domain-id", env["ROS_DOMAIN_ID"]]
     sim = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     holds = 0
@@ -97,10 +100,7 @@ def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str,
 
 def run(args: argparse.Namespace) -> int:
     """Measure and print the round trip at each rate."""
-    from hardware_if.network import apply_local_ros_env, run_domain_id
-
     apply_local_ros_env(run_domain_id())
-    from hardware_if.session import ros_session
 
     env = dict(os.environ)
     results = []

@@ -4,32 +4,30 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["add_parser", "run"]
+from rich.console import Console
+from rich.table import Table
+
+from safety.config import (
+    DEADMAN_MIN_PERIODS,
+    FORCE_PRESETS,
+    MAX_CONTROL_RATE_HZ,
+    MIN_CONTROL_RATE_HZ,
+    SafetyConfig,
+    load_safety_config,
+)
+
+__all__ = ["add_arguments", "run"]
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser("safety", help="show the effective safety limits", description=__doc__)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     show = actions.add_parser("show", help="print the effective limits as a table")
     show.add_argument("--config", metavar="FILE", default=None, help="a TOML or YAML safety configuration")
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the limits of the default or given configuration."""
-    from rich.console import Console
-    from rich.table import Table
-
-    from safety.config import (
-        DEADMAN_MIN_PERIODS,
-        FORCE_PRESETS,
-        MAX_CONTROL_RATE_HZ,
-        MIN_CONTROL_RATE_HZ,
-        SafetyConfig,
-        load_safety_config,
-    )
-
     config = load_safety_config(args.config) if args.config else SafetyConfig()
     spec = config.spec
     joints = Table(title=f"{spec.name}: joint limits at {config.control_rate_hz:g} Hz")

@@ -13,7 +13,17 @@ import json
 import time
 from pathlib import Path
 
-__all__ = ["add_parser", "run"]
+from rich.console import Console
+from rich.table import Table
+
+from safety.config import SafetyConfig, load_safety_config
+from sim.envs import gym_id
+from sim.robustness import check_relative_ranges, sweep_parameters
+from sim.sweep import EpisodeStore, make_trials, parse_ranges, run_trials
+from sim.sweep.report import summarize, write_report
+from tissue_retract.workers import ROBUSTNESS_WORKER
+
+__all__ = ["add_arguments", "run"]
 
 
 def add_sweep_arguments(parser: argparse.ArgumentParser, name: str) -> None:
@@ -33,14 +43,8 @@ def add_sweep_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register the subcommand."""
-    parser = subparsers.add_parser(
-        "robustness",
-        help="randomized robustness evaluation of a policy",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
     add_sweep_arguments(parser, "robustness")
     parser.add_argument(
         "--trials",
@@ -56,14 +60,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     parser.add_argument("--mode", choices=("random", "grid"), default="random", help="sampling (default random)")
     parser.add_argument("--no-safety", action="store_true", help="ablation: run without the safety filter")
-    parser.set_defaults(func=run)
 
 
 def safety_overrides(path: Path | None) -> dict[str, object] | None:
     """The settings of a SafetyConfig file that differ from the defaults (None without a file)."""
     if path is None:
         return None
-    from safety.config import SafetyConfig, load_safety_config
 
     defaults = SafetyConfig().to_dict()
     return {k: v for k, v in load_safety_config(path).to_dict().items() if v != defaults[k]}
@@ -71,14 +73,6 @@ def safety_overrides(path: Path | None) -> dict[str, object] | None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write its files, print its summary."""
-    from rich.console import Console
-    from rich.table import Table
-
-    from sim.envs import gym_id
-    from sim.robustness import check_relative_ranges, sweep_parameters
-    from sim.sweep import EpisodeStore, make_trials, parse_ranges, run_trials
-    from sim.sweep.report import summarize, write_report
-
     task_id = gym_id(args.task)
     ranges = parse_ranges(args.vary, valid_names=sweep_parameters())
     check_relative_ranges(ranges)
@@ -97,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     records = run_trials(
         trials,
-        "sim.robustness:robustness_episode",
+        ROBUSTNESS_WORKER,
         store=store,
         backend=args.backend,
         jobs=args.jobs,

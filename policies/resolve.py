@@ -1,0 +1,63 @@
+"""Loading a policy by name: the one resolver behind evaluate, deploy, sweeps and tuning.
+
+A policy name is ``scripted`` (the rule-based expert), ``random``, ``pretrained`` (the shipped policy of the
+environment's task), ``module:callable`` or a checkpoint path.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from typing import Any
+
+from policies.checkpoint import load_policy
+from policies.shipped import PRETRAINED, shipped_policy_path
+from psm_control.errors import ConfigurationError
+from sim.evaluation import Policy
+from sim.expert import ScriptedExpert
+
+__all__ = ["POLICY_NAMES", "resolve_policy"]
+
+#: What ``--policy`` accepts, for help texts and error messages.
+POLICY_NAMES = "scripted, random, pretrained, module:callable or a checkpoint path"
+
+_CHECKPOINT_SUFFIXES = (".pt", ".safetensors", ".zip")
+
+
+def _no_reset() -> None:
+    """The per-episode reset of a stateless policy."""
+
+
+def _reset_of(policy: Any) -> Callable[[], None]:
+    reset = getattr(policy, "reset", None)
+    return reset if callable(reset) else _no_reset
+
+
+def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
+    """A policy and its per-episode reset from its name (see the module docstring).
+
+    ``module:callable`` names a function of the observation dict, or a class built with the environment
+    (``cls(env)``, as :class:`sim.pulling.AggressivePull`); a ``reset()`` method is called per episode.
+
+    Raises:
+        ConfigurationError: The policy cannot be found.
+        CheckpointError: The checkpoint file is not a valid checkpoint or does not fit the environment.
+    """
+    if spec == "scripted":
+        expert = ScriptedExpert(env)
+        return expert, expert.reset
+    if spec == "random":
+        return (lambda _obs: env.action_space.sample()), _no_reset
+    if spec == PRETRAINED:
+        spec = str(shipped_policy_path(env.spec.id if env.spec is not None else type(env.unwrapped).__name__))
+    if ":" in spec and not spec.endswith(_CHECKPOINT_SUFFIXES):
+        module_name, _, attribute = spec.partition(":")
+        try:
+            target = getattr(importlib.import_module(module_name), attribute)
+        except (ImportError, AttributeError) as e:
+            raise ConfigurationError("policy", spec, "an importable module:callable") from e
+        if isinstance(target, type):  # a policy class is built with the environment, as ScriptedExpert(env)
+            target = target(env)
+        return target, _reset_of(target)
+    policy = load_policy(spec, env)
+    return policy, _reset_of(policy)

@@ -1,0 +1,107 @@
+"""The ``tissue-retract`` command line.
+
+Each subcommand lives in its own module ``tissue_retract.cli.<name>`` (dashes become underscores) with
+``add_arguments(parser)`` and ``run(args) -> int``; its docstring is the subcommand's description. A command
+with subcommands of its own (``bench``) has ``COMMANDS``, ``module_name(name)`` and
+``add_common_arguments(parser)`` instead. Only the
+module of the subcommand being run is imported: the others would cost seconds of torch, numba and
+Pinocchio start-up for nothing, and ``--help`` would need every optional extra.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Callable, Mapping, Sequence
+
+from psm_control import __version__
+from psm_control.errors import TissueRetractError
+
+__all__ = ["SUBCOMMANDS", "add_commands", "build_parser", "main"]
+
+#: Every subcommand and its one-line help, in the order ``--help`` lists them.
+SUBCOMMANDS: dict[str, str] = {
+    "demo": "run scripted-expert episodes (record demos, video); --kinematics: the FK cross-check",
+    "train": "train a policy (DDPG+HER, SQIL, DDPGBC, CoL, DEX) on a task",
+    "evaluate": "evaluate a policy on a task",
+    "deploy": "deploy a policy to the simulation or a dVRK over ROS 2",
+    "robustness": "randomized robustness evaluation of a policy",
+    "tune-safety": "sweep safety limits and recommend a configuration",
+    "reproduce": "train and evaluate the paper's Tables 1 and 2",
+    "sim-dvrk": "serve the dVRK's CRTK topics from the simulation",
+    "replay": "summarise and plot a recorded run",
+    "bench": "measure speed (env, chain, ros)",
+    "safety": "show the effective safety limits",
+}
+
+
+def module_name(command: str) -> str:
+    """The module that implements a subcommand."""
+    return f"{__name__}.{command.replace('-', '_')}"
+
+
+def add_commands(
+    subparsers: argparse._SubParsersAction[argparse.ArgumentParser],
+    commands: Mapping[str, str],
+    module_of: Callable[[str], str],
+    argv: Sequence[str],
+    common: Callable[[argparse.ArgumentParser], None] | None = None,
+) -> None:
+    """Add one subparser per command; import and fill in only the one ``argv`` names.
+
+    Args:
+        subparsers: Where the commands go.
+        commands: Command name -> one-line help.
+        module_of: The module implementing a command (``add_arguments`` and ``run``).
+        argv: The arguments after the parent command; the first that is not an option names the command.
+        common: Adds the options every one of these commands takes.
+    """
+    chosen = next((i for i, a in enumerate(argv) if not a.startswith("-")), None)
+    for name, summary in commands.items():
+        if chosen is None or name != argv[chosen]:
+            subparsers.add_parser(name, help=summary)
+            continue
+        module = importlib.import_module(module_of(name))
+        parser = subparsers.add_parser(
+            name, help=summary, description=module.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        )
+        if common is not None:
+            common(parser)
+        children = getattr(module, "COMMANDS", None)
+        if children is None:
+            module.add_arguments(parser)
+            parser.set_defaults(func=module.run)
+        else:
+            nested = parser.add_subparsers(dest=f"{name}_command", metavar="COMMAND", required=True)
+            add_commands(nested, children, module.module_name, argv[chosen + 1 :], module.add_common_arguments)
+
+
+def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
+    """Return the argument parser, with the arguments of the subcommand ``argv`` names."""
+    parser = argparse.ArgumentParser(
+        prog="tissue-retract",
+        description="Sim-to-real control stack for autonomous soft-tissue retraction with the dVRK PSM.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    add_commands(subparsers, SUBCOMMANDS, module_name, argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``tissue-retract``."""
+    arguments = sys.argv[1:] if argv is None else argv
+    parser = build_parser(arguments)
+    args = parser.parse_args(arguments)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args))
+    except TissueRetractError as e:
+        print(f"tissue-retract {args.command}: error: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"tissue-retract {args.command}: interrupted", file=sys.stderr)
+        return 130

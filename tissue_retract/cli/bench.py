@@ -1,0 +1,31 @@
+"""``tissue-retract bench TARGET``: speed measurements that print numbers.
+
+Each target lives in its own module ``tissue_retract.cli.bench_<target>`` with ``add_arguments(parser)``
+and ``run(args) -> int``; every target takes ``--json FILE``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["COMMANDS", "TARGETS", "add_common_arguments", "module_name"]
+
+#: Benchmark targets and their one-line help.
+TARGETS: dict[str, str] = {
+    "env": "environment steps/s (state-only and rendering)",
+    "chain": "control-chain tick latency against a naive reference",
+    "ros": "servo_jp -> measured_js round trip over loopback ROS 2",
+}
+
+#: The targets are this command's own subcommands.
+COMMANDS = TARGETS
+
+
+def module_name(target: str) -> str:
+    """The module that implements a benchmark target."""
+    return f"{__package__}.bench_{target}"
+
+
+def add_common_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options every target takes."""
+    parser.add_argument("--json", metavar="FILE", default=None, help="also write the results as JSON")

@@ -1,0 +1,83 @@
+"""Sweep workers: one trial of a policy in the simulation, for robustness sweeps and safety tuning.
+
+A worker runs in a worker process of :func:`sim.sweep.run_trials` (named ``"module:function"``), keeps its
+environment and policy between trials (one physics client per process), and returns one JSON-ready
+outcome. They live here, above ``sim`` and ``policies``, because they compose both.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from policies.resolve import resolve_policy
+from safety.config import SafetyConfig
+from sim.disturbances import DisturbanceWrapper
+from sim.envs import make
+from sim.evaluation import run_episode
+from sim.robustness import disturbances, episode_options
+from sim.tuning import integer_settings
+
+__all__ = ["ROBUSTNESS_WORKER", "TUNING_WORKER", "robustness_episode", "tuning_episode"]
+
+#: The names :func:`sim.sweep.run_trials` takes for the workers below.
+ROBUSTNESS_WORKER = f"{__name__}:robustness_episode"
+TUNING_WORKER = f"{__name__}:tuning_episode"
+
+_CACHE: dict[tuple[Any, ...], Any] = {}
+
+
+def _environment(task: str, safety: bool, safety_config: Mapping[str, Any] | None) -> Any:
+    key = ("env", task, safety, tuple(sorted((safety_config or {}).items())))
+    if key not in _CACHE:
+        kwargs: dict[str, Any] = {"safety": safety}
+        if safety_config:
+            kwargs["safety_config"] = SafetyConfig(**dict(safety_config))
+        for old in [k for k in _CACHE if k[0] == "env"]:
+            _CACHE.pop(old).close()  # one environment (one physics client) per worker process
+        _CACHE[key] = make(task, **kwargs)
+    return _CACHE[key]
+
+
+def robustness_episode(
+    trial: Mapping[str, Any],
+    *,
+    policy: str,
+    task: str,
+    relative: Mapping[str, bool],
+    safety: bool = True,
+    safety_config: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Run one trial of a sweep and return its outcome.
+
+    Args:
+        trial: ``{"index", "seed", "params"}``.
+        policy: A policy name, as :func:`policies.resolve.resolve_policy` takes.
+        task: Task id.
+        relative: Which parameters are multipliers of their nominal value.
+        safety: Run the safety filter (False only for ablations).
+        safety_config: Keyword overrides of :class:`safety.config.SafetyConfig` for this sweep.
+    """
+    params = {str(k): float(v) for k, v in trial["params"].items()}
+    env = _environment(task, safety, safety_config)
+    policy_key = ("policy", policy, id(env))
+    if policy_key not in _CACHE:
+        _CACHE[policy_key] = resolve_policy(policy, env)
+    policy_fn, policy_reset = _CACHE[policy_key]
+    observation_disturbances, action_disturbances = disturbances(params)
+    wrapped = DisturbanceWrapper(env, observation=observation_disturbances, action=action_disturbances)
+    options = episode_options(params, relative)
+    result = run_episode(wrapped, policy_fn, policy_reset, int(trial["seed"]), options=options)
+    outcome = result.to_dict()
+    outcome.pop("seed", None)
+    outcome["interventions"] = {"total": int(result.interventions)}
+    outcome["options"] = options
+    return outcome
+
+
+def tuning_episode(
+    trial: Mapping[str, Any], *, policy: str, task: str, base_config: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
+    """One episode of the policy under the trial's safety settings."""
+    overrides = {**dict(base_config or {}), **integer_settings(trial["params"])}
+    return robustness_episode({**trial, "params": {}}, policy=policy, task=task, relative={}, safety_config=overrides)
