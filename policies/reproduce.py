@@ -1,4 +1,4 @@
-"""The paper's evaluation protocol: Table 1 and Table 2, run as parallel local processes.
+"""The paper's evaluation protocol: Table 1 and Table 2, run as parallel processes on this machine or on Ray.
 
 Table 1 trains each algorithm on Tasks I-III (``TissueRetract-Lift-v0``, ``-Target-v0``,
 ``-MultiSite-v0``) with 100 demonstrations and seeds 1, 2, 3; Table 2 varies the demonstrations
@@ -28,6 +28,9 @@ from matplotlib.figure import Figure
 from policies.config import ALGORITHMS, TrainConfig
 from policies.errors import ReproductionError
 from policies.trainer import RunSpec, train
+from psm_control.errors import UnknownVariantError
+from sim.sweep import BACKENDS
+from sim.sweep.cluster import ray_cluster
 
 __all__ = [
     "OUTCOME_FILE",
@@ -193,12 +196,21 @@ def _read_curve(path: Path) -> list[tuple[int, float]]:
         return [(int(row["episode"]), float(row["success_rate"])) for row in csv.DictReader(f)]
 
 
-def run_all(runs: Iterable[Run], jobs: int = 1) -> list[RunOutcome]:
+def run_all(runs: Iterable[Run], jobs: int = 1, backend: str = "local") -> list[RunOutcome]:
     """Train every run, ``jobs`` processes at a time (each process uses one torch thread).
 
+    Args:
+        runs: The runs; a finished run (its ``outcome.json``) is read, not retrained.
+        jobs: Parallel runs on the local pool, or CPUs of a local Ray cluster started here.
+        backend: ``"local"`` (a process pool) or ``"ray"`` (``RAY_ADDRESS`` or a local cluster on
+            127.0.0.1). On a cluster of several machines the output folder must be on storage they share.
+
     Raises:
+        UnknownVariantError: Unknown backend.
         ReproductionError: After every run has ended, naming the runs that failed.
     """
+    if backend not in BACKENDS:
+        raise UnknownVariantError("backend", backend, BACKENDS)
     runs = list(runs)
     outcomes: list[RunOutcome] = []
     failures: list[tuple[str, str]] = []
@@ -210,7 +222,14 @@ def run_all(runs: Iterable[Run], jobs: int = 1) -> list[RunOutcome]:
         except Exception as e:
             failures.append((run.out_dir.name, f"{type(e).__name__}: {e}"))
 
-    if jobs <= 1:
+    if backend == "ray":
+        with ray_cluster(jobs) as ray:
+            # One CPU per run, as on the local pool; a failed run is reported, not retried.
+            remote = ray.remote(num_cpus=1, max_retries=0)(_execute)
+            refs = [remote.remote(run) for run in runs]
+            for run, ref in zip(runs, refs, strict=True):
+                collect(run, functools.partial(ray.get, ref))
+    elif jobs <= 1:
         for run in runs:
             collect(run, functools.partial(_execute, run))
     else:
@@ -296,11 +315,13 @@ def plot_curves(outcomes: Sequence[RunOutcome], path: Path, demos: int = 100) ->
     return path
 
 
-def reproduce(out_dir: Path, runs: Sequence[Run], jobs: int = 1) -> tuple[Path, list[RunOutcome]]:
-    """Run the protocol and write ``results.md`` and ``curves.png`` in ``out_dir``."""
+def reproduce(
+    out_dir: Path, runs: Sequence[Run], jobs: int = 1, backend: str = "local"
+) -> tuple[Path, list[RunOutcome]]:
+    """Run the protocol (on ``backend``, as :func:`run_all`) and write ``results.md`` and ``curves.png``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    outcomes = run_all(runs, jobs)
+    outcomes = run_all(runs, jobs, backend)
     wall = time.perf_counter() - start
     demos = max((r.demos for r in runs), default=100)
     plot_curves(outcomes, out_dir / "curves.png", demos)
@@ -313,8 +334,8 @@ def reproduce(out_dir: Path, runs: Sequence[Run], jobs: int = 1) -> tuple[Path, 
     text = [
         "# Reproduction of the seed paper's evaluation",
         "",
-        f"{len(runs)} runs, {jobs} parallel processes, wall time {wall:.0f} s in this sitting (runs finished "
-        "in an earlier sitting are read from their outcome.json, with their own wall time).",
+        f"{len(runs)} runs, {jobs} parallel processes ({backend}), wall time {wall:.0f} s in this sitting "
+        "(runs finished in an earlier sitting are read from their outcome.json, with their own wall time).",
         "",
         tables(outcomes, demos),
         "![learning curves](curves.png)",

@@ -19,18 +19,15 @@ from typing import Any
 
 from tqdm import tqdm
 
-from psm_control.errors import ConfigurationError, TissueRetractError, UnknownVariantError
+from psm_control.errors import ConfigurationError, UnknownVariantError
+from sim.sweep.cluster import ray_cluster
 from sim.sweep.space import Trial
 from sim.sweep.store import EpisodeStore
 
-__all__ = ["BACKENDS", "SweepError", "call_worker", "run_trials"]
+__all__ = ["BACKENDS", "call_worker", "run_trials"]
 
 #: Execution backends.
 BACKENDS = ("local", "ray")
-
-
-class SweepError(TissueRetractError):
-    """A sweep could not be run (for example, Ray is not installed)."""
 
 
 def _resolve(worker: str) -> Callable[..., dict[str, Any]]:
@@ -117,23 +114,7 @@ def _run_ray(
     max_attempts: int,
     progress: tqdm,
 ) -> None:
-    try:
-        import ray  # the dist extra: optional, so imported only when this backend is chosen
-    except ImportError as e:
-        raise SweepError("the ray backend needs the 'dist' extra: pip install 'tissue-retract[dist]'") from e
-    started_here = False
-    if not ray.is_initialized():
-        address = os.environ.get("RAY_ADDRESS")
-        if address:
-            ray.init(address=address, log_to_driver=False)
-        else:
-            # A local cluster on loopback only: without this variable Ray replaces 127.0.0.1 with the
-            # machine's routable address and listens on every interface.
-            os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
-            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-            ray.init(num_cpus=jobs, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
-        started_here = True
-    try:
+    with ray_cluster(jobs) as ray:
         # Ray re-runs a task whose worker process died, up to max_retries times.
         remote = ray.remote(max_retries=max_attempts - 1, retry_exceptions=False)(call_worker)
         refs = {remote.remote(worker, t.to_dict(), kwargs): t for t in pending}
@@ -147,9 +128,6 @@ def _run_ray(
                     record = {**_crash_record(trial, max_attempts), "error_detail": str(e)[:500]}
                 store.append(record)
                 progress.update(1)
-    finally:
-        if started_here:
-            ray.shutdown()
 
 
 def run_trials(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from tests.conftest import run_cli
@@ -40,3 +41,28 @@ def test_unknown_algorithm_is_refused() -> None:
     result = run_cli("reproduce", "--algos", "ppo")
     assert result.returncode == 1
     assert "ddpgbc" in result.stderr
+
+
+def _run_records(out: Path) -> dict[str, dict[str, object]]:
+    """Each run's outcome.json without what depends on the machine's speed or the hour."""
+    records = {}
+    for path in sorted(out.glob("runs/*/outcome.json")):
+        record = json.loads(path.read_text())
+        for key in ("wall_seconds", "steps_per_second", "finished"):
+            record.pop(key)
+        records[path.parent.name] = record
+    return records
+
+
+def test_ray_backend_gives_the_local_pools_records(tmp_path: Path) -> None:
+    """reproduce --backend ray (a local cluster on 127.0.0.1) trains the same runs to the same records."""
+    common = ("--budget", "4", "--tasks", "I", "--algos", "ddpg", "--seeds", "1", "--no-ablation")
+    common += ("--eval-every", "2", "--eval-episodes", "2", "--jobs", "1")
+    local = run_cli("reproduce", *common, "--out", str(tmp_path / "local"))
+    assert local.returncode == 0, local.stderr
+    ray = run_cli("reproduce", *common, "--backend", "ray", "--out", str(tmp_path / "ray"))
+    assert ray.returncode == 0, ray.stderr
+    assert "(ray)" in ray.stdout
+    local_records, ray_records = _run_records(tmp_path / "local"), _run_records(tmp_path / "ray")
+    assert list(local_records) == ["I-ddpg-d100-s1"]
+    assert local_records == ray_records

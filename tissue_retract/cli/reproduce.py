@@ -16,6 +16,7 @@ from pathlib import Path
 from policies.config import ALGORITHMS
 from policies.reproduce import TASKS, plan, reproduce
 from psm_control.errors import UnknownVariantError
+from sim.sweep import BACKENDS
 
 __all__ = ["add_arguments", "run"]
 
@@ -24,6 +25,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
     parser.add_argument("--budget", type=int, default=1000, help="training episodes per run (default 1000)")
     parser.add_argument("--jobs", type=int, default=None, help="parallel training processes (default: all cores)")
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="local",
+        help="local process pool, or Ray (RAY_ADDRESS, else a local cluster on 127.0.0.1; the dist extra)",
+    )
     parser.add_argument("--out", type=Path, default=Path("runs/reproduce"), help="output folder")
     parser.add_argument("--tasks", default="I,II,III", help="comma-separated tasks among I, II, III")
     parser.add_argument("--algos", default=",".join(ALGORITHMS), help="comma-separated algorithms")
@@ -56,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         eval_episodes=args.eval_episodes,
     )
     jobs = args.jobs or os.cpu_count() or 1
-    print(f"reproduce: {len(runs)} runs of {args.budget} episodes on {jobs} processes -> {args.out}")
-    path, _ = reproduce(args.out, runs, jobs=jobs)
+    print(f"reproduce: {len(runs)} runs of {args.budget} episodes on {jobs} processes ({args.backend}) -> {args.out}")
+    path, _ = reproduce(args.out, runs, jobs=jobs, backend=args.backend)
     print(path.read_text())
     return 0
