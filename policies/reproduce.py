@@ -28,9 +28,11 @@ from matplotlib.figure import Figure
 from policies.config import ALGORITHMS, TrainConfig
 from policies.errors import ReproductionError
 from policies.trainer import RunSpec, train
+from psm_control import __version__
 from psm_control.errors import UnknownVariantError
 from sim.sweep import BACKENDS
 from sim.sweep.cluster import ray_cluster
+from sim.sweep.page import Page, percent
 
 __all__ = [
     "OUTCOME_FILE",
@@ -43,7 +45,7 @@ __all__ = [
     "plot_curves",
     "reproduce",
     "run_all",
-    "tables",
+    "table_blocks",
 ]
 
 #: Task label -> Gymnasium id, as in the paper.
@@ -252,8 +254,8 @@ def _mean_ci(values: Sequence[float]) -> tuple[float, float]:
     return float(x.mean()), float(t * x.std(ddof=1) / math.sqrt(len(x)))
 
 
-def tables(outcomes: Sequence[RunOutcome], demos: int = 100) -> str:
-    """Markdown: Table 1 (ours beside the paper's) and, when present, Table 2."""
+def table_blocks(outcomes: Sequence[RunOutcome], demos: int = 100) -> list[tuple[str, list[str], list[list[str]]]]:
+    """Table 1 (ours beside the paper's) and, when present, Table 2, as (heading, header, rows)."""
     by: dict[tuple[str, str, int], list[float]] = {}
     for o in outcomes:
         by.setdefault((o.run.task, o.run.algo, o.run.demos), []).append(100 * o.success)
@@ -266,27 +268,27 @@ def tables(outcomes: Sequence[RunOutcome], demos: int = 100) -> str:
         mean, ci = _mean_ci(values)
         return f"{mean:.0f} +- {ci:.0f}"
 
-    lines = [f"### Table 1: success % ({demos} demonstrations; ours / paper)", ""]
-    lines.append("| Task | " + " | ".join(algos) + " |")
-    lines.append("|---|" + "---|" * len(algos))
+    rows = []
     for task in tasks:
-        row = []
+        row = [task]
         for algo in algos:
             paper = PAPER_TABLE1.get(task, {}).get(algo)
             ref = f"{paper[0]:g} +- {paper[1]:g}" if paper else "-"
             row.append(f"{cell(by.get((task, algo, demos)))} / {ref}")
-        lines.append(f"| {task} | " + " | ".join(row) + " |")
+        rows.append(row)
+    blocks = [(f"Table 1: success % ({demos} demonstrations; ours / paper)", ["Task", *algos], rows)]
     ablation = sorted(
         {o.run.demos for o in outcomes if o.run.task == "III"} - {demos} | ({demos} if "III" in tasks else set())
     )
     if len(ablation) > 1:
-        lines += ["", "### Table 2: Task III success % by demonstrations (ours / paper)", ""]
-        lines.append("| Algorithm | " + " | ".join(str(n) for n in ablation) + " |")
-        lines.append("|---|" + "---|" * len(ablation))
-        for algo in (a for a in algos if a in PAPER_TABLE2):
-            row = [f"{cell(by.get(('III', algo, n)))} / {PAPER_TABLE2[algo].get(n, '-')}" for n in ablation]
-            lines.append(f"| {algo} | " + " | ".join(row) + " |")
-    return "\n".join(lines) + "\n"
+        rows = [
+            [algo, *(f"{cell(by.get(('III', algo, n)))} / {PAPER_TABLE2[algo].get(n, '-')}" for n in ablation)]
+            for algo in algos
+            if algo in PAPER_TABLE2
+        ]
+        heading = "Table 2: Task III success % by demonstrations (ours / paper)"
+        blocks.append((heading, ["Algorithm", *(str(n) for n in ablation)], rows))
+    return blocks
 
 
 def plot_curves(outcomes: Sequence[RunOutcome], path: Path, demos: int = 100) -> Path:
@@ -316,34 +318,47 @@ def plot_curves(outcomes: Sequence[RunOutcome], path: Path, demos: int = 100) ->
 
 
 def reproduce(
-    out_dir: Path, runs: Sequence[Run], jobs: int = 1, backend: str = "local"
+    out_dir: Path, runs: Sequence[Run], jobs: int = 1, backend: str = "local", command: str = ""
 ) -> tuple[Path, list[RunOutcome]]:
-    """Run the protocol (on ``backend``, as :func:`run_all`) and write ``results.md`` and ``curves.png``."""
+    """Run the protocol (on ``backend``, as :func:`run_all`) and write ``results.md``, ``results.html`` and
+    ``curves.png``; ``command`` is the command line shown on the page. Returns the Markdown's path."""
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     outcomes = run_all(runs, jobs, backend)
     wall = time.perf_counter() - start
     demos = max((r.demos for r in runs), default=100)
     plot_curves(outcomes, out_dir / "curves.png", demos)
-    per_run = [
-        f"| {o.run.task} | {o.run.algo} | {o.run.demos} | {o.run.seed} | {100 * o.success:.0f} | "
-        f"{o.wall_seconds:.0f}{f' (from episode {o.resumed_from})' if o.resumed_from else ''} | "
-        f"{o.steps_per_second:.0f} |"
-        for o in outcomes
-    ]
-    text = [
-        "# Reproduction of the seed paper's evaluation",
-        "",
-        f"{len(runs)} runs, {jobs} parallel processes ({backend}), wall time {wall:.0f} s in this sitting "
-        "(runs finished in an earlier sitting are read from their outcome.json, with their own wall time).",
-        "",
-        tables(outcomes, demos),
-        "![learning curves](curves.png)",
-        "",
-        "| Task | Algorithm | Demos | Seed | Success % | Wall time [s] | Env steps/s once learning |",
-        "|---|---|---|---|---|---|---|",
-        *per_run,
-    ]
-    path = out_dir / "results.md"
-    path.write_text("\n".join(text) + "\n")
+    page = Page("Reproduction of the seed paper's evaluation")
+    page.card(
+        [
+            ("runs", f"{len(runs)} of {max((r.episodes for r in runs), default=0)} training episodes each"),
+            ("processes", f"{jobs} in parallel ({backend})"),
+            ("wall time", f"{wall:.0f} s in this sitting (runs finished earlier are read with their own times)"),
+            ("package", f"tissue-retract {__version__}, commit {_commit() or 'unknown'}"),
+        ]
+    )
+    if command:
+        page.heading("Command")
+        page.command(command)
+    for heading, header, rows in table_blocks(outcomes, demos):
+        page.heading(heading)
+        page.table(header, rows)
+    page.figure(out_dir / "curves.png", "mean evaluation success against training episodes")
+    page.heading("Every run")
+    page.table(
+        ["Task", "Algorithm", "Demos", "Seed", "Success", "Wall time", "Env steps/s once learning"],
+        [
+            [
+                o.run.task,
+                o.run.algo,
+                str(o.run.demos),
+                str(o.run.seed),
+                percent(o.success),
+                f"{o.wall_seconds:.0f} s" + (f" (from episode {o.resumed_from})" if o.resumed_from else ""),
+                f"{o.steps_per_second:.0f}",
+            ]
+            for o in outcomes
+        ],
+    )
+    path = page.write(out_dir, stem="results")["report_md"]
     return path, outcomes

@@ -1,9 +1,8 @@
-"""The sweep's report: PNG plots and a self-contained HTML page (plus Markdown) a person reads first."""
+"""The sweep's report: a summary card, success, peak force and failure classes against each varied parameter,
+as PNG plots and a self-contained HTML page (plus Markdown)."""
 
 from __future__ import annotations
 
-import base64
-import html
 import math
 from collections import Counter
 from collections.abc import Sequence
@@ -12,7 +11,11 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import FormatStrFormatter
 
+from psm_control import __version__
+from sim.evaluation import FAILURE_CLASSES
+from sim.sweep.page import Page, percent, percent_interval, quantity
 from sim.sweep.space import ParameterRange
 from sim.sweep.stats import binned_success, wilson_interval
 
@@ -48,15 +51,42 @@ def _plot_success(records: Sequence[dict[str, Any]], parameter: ParameterRange, 
     stats = [b for b in binned_success(records, parameter.name, relative=parameter.relative) if b.episodes]
     figure = Figure(figsize=(5.5, 3.5), dpi=110)
     axis = figure.subplots()
-    centres = [math.sqrt(b.low * b.high) if parameter.relative and b.low > 0 else (b.low + b.high) / 2 for b in stats]
+    centres = [_centre(b.low, b.high, parameter.relative) for b in stats]
     rates = [100 * b.success_rate for b in stats]
     errors = [[100 * (b.success_rate - b.ci_low) for b in stats], [100 * (b.ci_high - b.success_rate) for b in stats]]
     axis.errorbar(centres, rates, yerr=errors, fmt="o-", capsize=4, color="tab:blue")
     if parameter.relative:
-        axis.set_xscale("log")
+        _plain_log_axis(axis)
     axis.set_ylim(-5, 105)
-    axis.set_xlabel(parameter.name + (" (x nominal)" if parameter.relative else ""))
+    axis.set_xlabel(_axis_label(parameter))
     axis.set_ylabel("success [%] (95 % CI)")
+    axis.grid(alpha=0.3)
+    figure.tight_layout()
+    figure.savefig(path)
+
+
+def _plot_force_against(
+    records: Sequence[dict[str, Any]], parameter: ParameterRange, path: Path, force_limit_n: float | None
+) -> None:
+    rows = [r for r in records if "error" not in r and r.get("peak_force_n") is not None]
+    figure = Figure(figsize=(5.5, 3.5), dpi=110)
+    axis = figure.subplots()
+    for success, colour, label in ((True, "tab:green", "success"), (False, "tab:red", "failure")):
+        chosen = [r for r in rows if bool(r.get("success")) is success and parameter.name in r.get("params", {})]
+        axis.scatter(
+            [float(r["params"][parameter.name]) for r in chosen],
+            [float(r["peak_force_n"]) for r in chosen],
+            s=14,
+            color=colour,
+            label=label,
+        )
+    if force_limit_n is not None:
+        axis.axhline(force_limit_n, color="black", linestyle="--", label=f"limit {force_limit_n:g} N")
+    if parameter.relative:
+        _plain_log_axis(axis)
+    axis.set_xlabel(_axis_label(parameter))
+    axis.set_ylabel("peak retraction force [N]")
+    axis.legend(fontsize=8)
     axis.grid(alpha=0.3)
     figure.tight_layout()
     figure.savefig(path)
@@ -77,98 +107,131 @@ def _plot_forces(records: Sequence[dict[str, Any]], path: Path, force_limit_n: f
     figure.savefig(path)
 
 
+def _plain_log_axis(axis: Any) -> None:
+    """A logarithmic x axis labelled 0.5, 1, 2 rather than 5 x 10^-1."""
+    axis.set_xscale("log")
+    for ticks in (axis.xaxis.set_major_formatter, axis.xaxis.set_minor_formatter):
+        ticks(FormatStrFormatter("%g"))
+
+
+def _centre(low: float, high: float, relative: bool) -> float:
+    return math.sqrt(low * high) if relative and low > 0 else (low + high) / 2
+
+
+def _axis_label(parameter: ParameterRange) -> str:
+    return parameter.name + (" (x nominal)" if parameter.relative else "")
+
+
+def _counts(counts: dict[str, int]) -> str:
+    """``{"none": 45, "timeout": 3}`` as ``none 45, timeout 3`` (``none`` when empty)."""
+    return ", ".join(f"{name} {count}" for name, count in counts.items() if count) or "none"
+
+
+def _bin_label(low: float, high: float, relative: bool) -> str:
+    suffix = " x" if relative else ""
+    return f"{quantity(low)} to {quantity(high)}{suffix}"
+
+
 def write_report(
     out_dir: Path,
     records: Sequence[dict[str, Any]],
     ranges: Sequence[ParameterRange],
     *,
     title: str,
-    context: dict[str, Any],
+    context: dict[str, str],
     force_limit_n: float | None = None,
+    limit_enforced: bool = True,
+    command: str = "",
 ) -> dict[str, Path]:
     """Write plots, ``report.md`` and a self-contained ``report.html`` into ``out_dir``.
 
+    Args:
+        out_dir: Where the files go.
+        records: The sweep's trial records.
+        ranges: The varied parameters.
+        title: The page's heading.
+        context: Label -> text rows for the summary card (policy, task, sampling...).
+        force_limit_n: The retraction-force limit the episodes ran under [N] (None: not known).
+        limit_enforced: False when the safety filter was off (the limit is shown, not claimed).
+        command: The command line that ran the sweep.
+
     Returns:
-        The written files by role (``report_html``, ``report_md``, ``forces_png``, ``success_<name>_png``).
+        The written files by role (``report_html``, ``report_md``, the PNGs).
     """
-    out_dir.mkdir(parents=True, exist_ok=True)
     summary = summarize(records)
     files: dict[str, Path] = {"forces_png": out_dir / "peak_force_histogram.png"}
     _plot_forces(records, files["forces_png"], force_limit_n)
-    for parameter in ranges:
-        path = out_dir / f"success_vs_{parameter.name}.png"
-        _plot_success(records, parameter, path)
-        files[f"success_{parameter.name}_png"] = path
-    lines = [f"# {title}", ""]
-    lines += [f"- {key}: {value}" for key, value in context.items()]
+    page = Page(title)
     low, high = summary["ci95"]
-    lines += [
-        f"- episodes: {summary['episodes']} ({summary['errors']} errors)",
-        f"- success: {100 * summary['success_rate']:.1f} % (95 % CI {100 * low:.1f} to {100 * high:.1f} %)",
-        f"- peak force [N]: {summary['peak_force_n']}",
-        f"- safety stops: {summary['safety_stops']}",
-        f"- interventions: {summary['interventions']}",
-        f"- failure classes: {summary['failure_classes']}",
-        "",
+    worst = summary["peak_force_n"]["max"]
+    rows = [*context.items()]
+    rows += [
+        ("episodes", f"{summary['episodes']} ({summary['errors']} errors)"),
+        ("success", f"{percent(summary['success_rate'])} (95 % CI {percent_interval(low, high)})"),
     ]
+    alert = []
+    if force_limit_n is not None and worst is not None:
+        ratio = worst / force_limit_n
+        enforced = "" if limit_enforced else ", not enforced: safety filter off"
+        rows.append(
+            (
+                "worst peak force",
+                f"{quantity(worst, 'N')}, {ratio:.2f} x the {quantity(force_limit_n, 'N')} limit{enforced}",
+            )
+        )
+        if ratio > 1.0:
+            alert.append("worst peak force")
+    else:
+        rows.append(("worst peak force", quantity(worst, "N")))
+    rows += [
+        (
+            "peak force median / p95",
+            f"{quantity(summary['peak_force_n']['p50'], 'N')} / {quantity(summary['peak_force_n']['p95'], 'N')}",
+        ),
+        ("safety stops", f"{summary['safety_stops']} ticks"),
+        ("interventions", _counts(summary["interventions"])),
+        ("failure classes", _counts(summary["failure_classes"])),
+        ("package", f"tissue-retract {__version__}"),
+    ]
+    page.card(rows, alert=alert)
+    if command:
+        page.heading("Command")
+        page.command(command)
     for parameter in ranges:
-        lines += [
-            f"## Success against {parameter.describe()}",
-            "",
-            "| bin | episodes | success % | 95 % CI | peak force p95 [N] |",
-            "|---|---|---|---|---|",
-        ]
-        for b in binned_success(records, parameter.name, relative=parameter.relative):
-            if b.episodes:
-                lines.append(
-                    f"| {b.low:.4g} to {b.high:.4g} | {b.episodes} | {100 * b.success_rate:.0f} | "
-                    f"{100 * b.ci_low:.0f} to {100 * b.ci_high:.0f} | {b.peak_force_p95_n:.3g} |"
-                )
-        lines += ["", f"![success against {parameter.name}]({files[f'success_{parameter.name}_png'].name})", ""]
-    lines += ["## Peak force", "", f"![peak force histogram]({files['forces_png'].name})", ""]
-    markdown = "\n".join(lines)
-    files["report_md"] = out_dir / "report.md"
-    files["report_md"].write_text(markdown)
-    files["report_html"] = out_dir / "report.html"
-    files["report_html"].write_text(_html(markdown, out_dir))
+        stats = [b for b in binned_success(records, parameter.name, relative=parameter.relative) if b.episodes]
+        success_png = out_dir / f"success_vs_{parameter.name}.png"
+        force_png = out_dir / f"peak_force_vs_{parameter.name}.png"
+        _plot_success(records, parameter, success_png)
+        _plot_force_against(records, parameter, force_png, force_limit_n)
+        files[f"success_{parameter.name}_png"] = success_png
+        files[f"force_{parameter.name}_png"] = force_png
+        page.heading(f"Success and peak force against {parameter.describe()}")
+        page.table(
+            [parameter.name, "episodes", "success", "95 % CI", "peak force max", "peak force p95"],
+            [
+                [
+                    _bin_label(b.low, b.high, parameter.relative),
+                    str(b.episodes),
+                    percent(b.success_rate),
+                    percent_interval(b.ci_low, b.ci_high),
+                    quantity(b.peak_force_max_n, "N"),
+                    quantity(b.peak_force_p95_n, "N"),
+                ]
+                for b in stats
+            ],
+        )
+        page.figure(success_png, f"success against {parameter.name} (95 % CI)")
+        page.figure(force_png, f"peak force against {parameter.name}, per episode")
+        classes = [c for c in FAILURE_CLASSES if any(b.failure_classes.get(c) for b in stats)]
+        page.heading(f"Failure classes against {parameter.name}")
+        page.table(
+            [parameter.name, *classes],
+            [
+                [_bin_label(b.low, b.high, parameter.relative), *(str(b.failure_classes.get(c, 0)) for c in classes)]
+                for b in stats
+            ],
+        )
+    page.heading("Peak force")
+    page.figure(files["forces_png"], "peak retraction force per episode")
+    files.update(page.write(out_dir))
     return files
-
-
-def _html(markdown: str, out_dir: Path) -> str:
-    """A minimal Markdown-to-HTML rendering with the PNGs inlined, so the page is one file."""
-    body = []
-    in_table = False
-    for line in markdown.splitlines():
-        if line.startswith("|"):
-            cells = [c.strip() for c in line.strip("|").split("|")]
-            if all(set(c) <= {"-"} for c in cells):
-                continue
-            tag = "th" if not in_table else "td"
-            if not in_table:
-                body.append("<table>")
-                in_table = True
-            body.append("<tr>" + "".join(f"<{tag}>{html.escape(c)}</{tag}>" for c in cells) + "</tr>")
-            continue
-        if in_table:
-            body.append("</table>")
-            in_table = False
-        if line.startswith("!["):
-            name = line[line.index("(") + 1 : -1]
-            data = base64.b64encode((out_dir / name).read_bytes()).decode()
-            body.append(f'<p><img alt="{html.escape(name)}" src="data:image/png;base64,{data}"></p>')
-        elif line.startswith("## "):
-            body.append(f"<h2>{html.escape(line[3:])}</h2>")
-        elif line.startswith("# "):
-            body.append(f"<h1>{html.escape(line[2:])}</h1>")
-        elif line.startswith("- "):
-            body.append(f"<li>{html.escape(line[2:])}</li>")
-        elif line:
-            body.append(f"<p>{html.escape(line)}</p>")
-    if in_table:
-        body.append("</table>")
-    style = "body{font-family:sans-serif;max-width:60em;margin:2em auto}td,th{border:1px solid #ccc;padding:.2em .6em}"
-    return (
-        f"<!doctype html><html><head><meta charset='utf-8'><style>{style}</style></head><body>\n"
-        + "\n".join(body)
-        + "\n</body></html>\n"
-    )

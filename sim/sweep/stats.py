@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,8 @@ class BinStats:
         ci_low: Lower end of the 95 % interval of the success rate.
         ci_high: Upper end of the 95 % interval.
         peak_force_p95_n: 95th percentile of the episodes' peak force [N] (nan if none reported).
+        peak_force_max_n: Largest peak force of the bin's episodes [N] (nan if none reported).
+        failure_classes: Episodes per failure class in the bin.
     """
 
     low: float
@@ -53,6 +56,8 @@ class BinStats:
     ci_low: float
     ci_high: float
     peak_force_p95_n: float
+    peak_force_max_n: float = math.nan
+    failure_classes: dict[str, int] = field(default_factory=dict)
 
     @property
     def success_rate(self) -> float:
@@ -95,6 +100,8 @@ def binned_success(
                 ci[0],
                 ci[1],
                 float(np.percentile(forces, 95)) if forces else math.nan,
+                max(forces) if forces else math.nan,
+                dict(Counter(str(r.get("failure_class", "none")) for r in members)),
             )
         )
     return result

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from policies.errors import ReproductionError
-from policies.reproduce import OUTCOME_FILE, PAPER_TABLE1, Run, RunOutcome, plan, reproduce, tables
+from policies.reproduce import OUTCOME_FILE, PAPER_TABLE1, Run, RunOutcome, plan, reproduce, table_blocks
 from policies.toy_env import TOY_TASK_ID
 
 TINY = {"random_steps": 50, "updates_per_episode": 2, "batch_size": 16, "hidden_sizes": (16,), "bc_pretrain_steps": 5}
@@ -31,7 +31,7 @@ def test_tables_put_ours_beside_the_papers() -> None:
 
     outcomes = [outcome("col", s, 100, v) for s, v in ((1, 0.7), (2, 0.8), (3, 0.9))]
     outcomes += [outcome("col", s, 25, 0.5) for s in (1, 2, 3)]
-    text = tables(outcomes)
+    text = str(table_blocks(outcomes))
     paper = PAPER_TABLE1["III"]["col"]
     assert f"80 +- 25 / {paper[0]:g} +- {paper[1]:g}" in text
     assert "Table 2" in text and "50 +- 0 / 50" in text

@@ -128,4 +128,4 @@ def test_report_plots_have_content(tmp_path: Path) -> None:
         coloured = np.abs(pixels[..., 0] - pixels[..., 2]) > 0.3  # blue markers or orange bars
         assert coloured.mean() > 0.002
     page = files["report_html"].read_text()
-    assert "data:image/png;base64," in page and "Success against stiffness" in page
+    assert "data:image/png;base64," in page and "Success and peak force against stiffness" in page

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import shlex
 import sys
 from collections.abc import Callable, Mapping, Sequence
 
@@ -97,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
+    args.command_line = shlex.join(["tissue-retract", *arguments])  # for reports: what exactly ran
     try:
         return int(args.func(args))
     except TissueRetractError as e:

@@ -64,6 +64,6 @@ def run(args: argparse.Namespace) -> int:
     )
     jobs = args.jobs or os.cpu_count() or 1
     print(f"reproduce: {len(runs)} runs of {args.budget} episodes on {jobs} processes ({args.backend}) -> {args.out}")
-    path, _ = reproduce(args.out, runs, jobs=jobs, backend=args.backend)
+    path, _ = reproduce(args.out, runs, jobs=jobs, backend=args.backend, command=args.command_line)
     print(path.read_text())
     return 0

@@ -81,12 +81,13 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     store = EpisodeStore(out / "episodes.jsonl")
     already = len(store.done() & {t.index for t in trials})
+    overrides = safety_overrides(args.safety_config)
     kwargs = {
         "policy": args.policy,
         "task": task_id,
         "relative": {r.name: r.relative for r in ranges},
         "safety": not args.no_safety,
-        "safety_config": safety_overrides(args.safety_config),
+        "safety_config": overrides,
     }
     started = time.perf_counter()
     records = run_trials(
@@ -117,13 +118,24 @@ def run(args: argparse.Namespace) -> int:
         }
     )
     (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    config = SafetyConfig.from_mapping(overrides or {})
     context = {
         "policy": args.policy,
         "task": task_id,
-        "sampling": f"{args.mode}, seed {args.seed}",
+        "varied": ", ".join(r.describe() for r in ranges),
+        "sampling": f"{args.mode}, {args.trials} trials, seed {args.seed}",
         "safety filter": "on" if not args.no_safety else "OFF (ablation)",
     }
-    write_report(out, records, ranges, title=f"Robustness of {args.policy} on {task_id}", context=context)
+    write_report(
+        out,
+        records,
+        ranges,
+        title=f"Robustness of {args.policy} on {task_id}",
+        context=context,
+        force_limit_n=config.effective_force_limit_n,
+        limit_enforced=not args.no_safety,
+        command=args.command_line,
+    )
     table = Table(title=f"robustness: {args.policy} on {task_id}")
     table.add_column("metric")
     table.add_column("value", justify="right")

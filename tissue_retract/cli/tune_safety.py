@@ -1,9 +1,9 @@
 """``tissue-retract tune-safety``: sweep safety settings, show success against peak force, recommend one.
 
 Every setting of the ``--grid`` runs the same ``--episodes`` seeds through the full chain. The output
-folder gets ``episodes.jsonl`` (resumable), ``settings.md`` (every setting, Pareto front marked),
-``pareto.png`` and ``recommended_safety.yaml``: the most successful setting whose largest peak force
-stayed under ``--max-force-n``, loadable with ``--safety-config``.
+folder gets ``episodes.jsonl`` (resumable), ``settings.html`` and ``settings.md`` (every setting, the Pareto
+front marked), ``pareto.png`` and ``recommended_safety.yaml``: the most successful setting whose largest
+peak force stayed under ``--max-force-n``, loadable with ``--safety-config``.
 """
 
 from __future__ import annotations
@@ -17,9 +17,11 @@ from matplotlib.figure import Figure
 from rich.console import Console
 from rich.table import Table
 
+from psm_control import __version__
 from safety.config import SafetyConfig
 from sim.envs import gym_id
 from sim.sweep import EpisodeStore, parse_ranges, run_trials
+from sim.sweep.page import Page, percent, percent_interval, quantity, unit_of
 from sim.tuning import (
     SettingResult,
     pareto_front,
@@ -122,31 +124,28 @@ def run(args: argparse.Namespace) -> int:
     front = pareto_front(results)
     chosen = recommend(results, bound)
     names = [r.name for r in ranges]
-    lines = [
-        f"# Safety tuning of {args.policy} on {task_id}",
-        "",
-        f"- grid: {args.grid} ({args.levels} levels), {args.episodes} episodes per setting, seed {args.seed}",
-        f"- peak-force bound: {bound:g} N",
-        "",
-        "| " + " | ".join(names) + " | success % | 95 % CI | max peak force [N] | mean peak force [N] | "
-        "interventions | Pareto |",
-        "|" + "---|" * (len(names) + 6),
-    ]
+    page = Page(f"Safety tuning of {args.policy} on {task_id}")
     table = Table(title=f"tune-safety: {args.policy} on {task_id} (bound {bound:g} N)")
     for column in [*names, "success %", "max peak N", "Pareto"]:
         table.add_column(column, justify="right")
+    rows = []
     for r in results:
         low, high = r.ci95
         mark = ("front" if r in front else "") + (" recommended" if r is chosen else "")
-        values = [f"{r.setting[n]:.4g}" for n in names]
-        lines.append(
-            "| " + " | ".join(values) + f" | {100 * r.success_rate:.0f} | {100 * low:.0f} to "
-            f"{100 * high:.0f} | {r.max_peak_force_n:.3f} | {r.mean_peak_force_n:.3f} | {r.interventions} | "
-            f"{mark} |"
+        values = [quantity(r.setting[n], unit_of(n)) for n in names]
+        rows.append(
+            [
+                *values,
+                percent(r.success_rate),
+                percent_interval(low, high),
+                quantity(r.max_peak_force_n, "N"),
+                quantity(r.mean_peak_force_n, "N"),
+                str(r.interventions),
+                mark.strip(),
+            ]
         )
         table.add_row(*values, f"{100 * r.success_rate:.0f}", f"{r.max_peak_force_n:.3f}", mark)
     _plot(results, front, chosen, bound, out / "pareto.png")
-    lines += ["", "![success against peak force](pareto.png)", ""]
     summary: dict[str, object] = {
         "task": task_id,
         "policy": args.policy,
@@ -163,13 +162,31 @@ def run(args: argparse.Namespace) -> int:
             f"{chosen.max_peak_force_n:.3f} N <= {bound:g} N."
         )
         write_config(out / "recommended_safety.yaml", chosen.setting, base, note)
-        lines.append(f"Recommended: {chosen.setting} -> `recommended_safety.yaml`")
+        setting = ", ".join(f"{n} = {quantity(chosen.setting[n], unit_of(n))}" for n in names)
+        verdict = f"Recommended: {setting} (written to recommended_safety.yaml)"
         summary["recommended"] = chosen.setting
     else:
-        lines.append(f"No setting kept the largest peak force under {bound:g} N; nothing recommended.")
-    (out / "settings.md").write_text("\n".join(lines) + "\n")
+        verdict = f"No setting kept the largest peak force under {bound:g} N; nothing recommended."
+    page.card(
+        [
+            ("policy", args.policy),
+            ("task", task_id),
+            ("grid", f"{args.grid} ({args.levels} levels, {len(results)} settings)"),
+            ("episodes per setting", f"{args.episodes}, seed {args.seed}"),
+            ("peak-force bound", quantity(bound, "N")),
+            ("verdict", verdict),
+            ("package", f"tissue-retract {__version__}"),
+        ],
+        alert=[] if chosen is not None else ["verdict"],
+    )
+    page.heading("Command")
+    page.command(args.command_line)
+    page.heading("Settings (every setting ran the same episode seeds)")
+    page.table([*names, "success", "95 % CI", "max peak force", "mean peak force", "interventions", "Pareto"], rows)
+    page.figure(out / "pareto.png", "success against the largest peak force; the Pareto front in blue")
+    page.write(out, stem="settings")
     (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
     console = Console(width=110)
     console.print(table)
-    console.print(lines[-1])
+    console.print(verdict)
     return 0 if chosen is not None else 1
