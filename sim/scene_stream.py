@@ -1,0 +1,137 @@
+"""Streaming a run's 3-D scene to where it is watched: a recording, a live Foxglove view, or both.
+
+:class:`SceneStream` is what a control loop calls once per tick; it builds the messages with
+:class:`sim.scene3d.PsmScene` and hands each to every sink. A sink takes ``(topic, message, t_s)``:
+the MCAP recorder writes the message's protobuf encoding under its Foxglove schema, and
+:class:`LiveScene` logs it to a Foxglove WebSocket server on 127.0.0.1, which the Foxglove app opens
+(``ws://127.0.0.1:PORT``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Protocol
+
+import foxglove
+import numpy as np
+from foxglove import channels
+from foxglove.messages import Log, LogLevel
+
+from sim.scene3d import COMMANDED_PREFIX, PsmScene, timestamp
+
+__all__ = [
+    "ARM_TOPIC",
+    "LOG_TOPIC",
+    "TASK_TOPIC",
+    "TRANSFORMS_TOPIC",
+    "LiveScene",
+    "SceneSink",
+    "SceneStream",
+]
+
+#: The scene's topics: frames of the measured (and commanded) arm, link shapes, tissue and markers, events.
+TRANSFORMS_TOPIC = "/scene/transforms"
+ARM_TOPIC = "/scene/arm"
+TASK_TOPIC = "/scene/task"
+LOG_TOPIC = "/scene/log"
+
+#: The link shapes are sent again this often [s], so that a player seeking into a recording finds them.
+_ARM_REPEAT_S = 1.0
+
+
+class SceneSink(Protocol):
+    """Where scene messages go."""
+
+    def write_message(self, topic: str, message: Any, t_s: float) -> None:
+        """Take one Foxglove SDK message at time ``t_s`` [s]."""
+
+
+class LiveScene:
+    """A Foxglove WebSocket server on 127.0.0.1 that serves the scene as it happens.
+
+    Args:
+        port: TCP port (0 picks a free one; see :attr:`port`).
+        name: The server's name shown in the Foxglove app.
+    """
+
+    def __init__(self, port: int = 8765, name: str = "tissue-retract") -> None:
+        self._server = foxglove.start_server(name=name, host="127.0.0.1", port=port)
+        self._channels: dict[str, Any] = {}
+
+    @property
+    def port(self) -> int:
+        """The port the server listens on."""
+        return int(self._server.port)
+
+    def write_message(self, topic: str, message: Any, t_s: float) -> None:
+        """Log a message on its topic (the channel is made on first use, typed by the message)."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            channel = getattr(channels, f"{type(message).__name__}Channel")(topic)
+            self._channels[topic] = channel
+        channel.log(message, log_time=round(t_s * 1e9))
+
+    def close(self) -> None:
+        """Stop the server."""
+        for channel in self._channels.values():
+            channel.close()
+        self._server.stop()
+
+
+class SceneStream:
+    """Sends the scene of one arm to its sinks, tick by tick.
+
+    Args:
+        scene: Builds the messages.
+        sinks: Where they go.
+    """
+
+    def __init__(self, scene: PsmScene, sinks: Sequence[SceneSink]) -> None:
+        self.scene = scene
+        self.sinks = list(sinks)
+        self._arm_sent_s = -np.inf
+
+    def _send(self, topic: str, message: Any, t_s: float) -> None:
+        for sink in self.sinks:
+            sink.write_message(topic, message, t_s)
+
+    def tick(
+        self,
+        t_s: float,
+        q: np.ndarray,
+        jaw: float,
+        *,
+        commanded_q: np.ndarray | None = None,
+        commanded_jaw: float | None = None,
+        nodes: np.ndarray | None = None,
+        triangles: np.ndarray | None = None,
+        site: np.ndarray | None = None,
+        goal: np.ndarray | None = None,
+        grasp: np.ndarray | None = None,
+        force_n: np.ndarray | None = None,
+    ) -> None:
+        """The arm at its measured joints (and, if given, where it was commanded), the tissue and markers.
+
+        Positions are in the scene's root frame [m]; see :meth:`sim.scene3d.PsmScene.task`.
+        """
+        if not self.sinks:
+            return
+        if t_s - self._arm_sent_s >= _ARM_REPEAT_S:
+            self._send(ARM_TOPIC, self.scene.arm(t_s), t_s)
+            self._send(ARM_TOPIC, self.scene.arm(t_s, prefix=COMMANDED_PREFIX), t_s)
+            self._arm_sent_s = t_s
+        self._send(TRANSFORMS_TOPIC, self.scene.transforms(t_s, q, jaw), t_s)
+        if commanded_q is not None:
+            jaw_command = jaw if commanded_jaw is None else commanded_jaw
+            self._send(TRANSFORMS_TOPIC, self.scene.transforms(t_s, commanded_q, jaw_command, COMMANDED_PREFIX), t_s)
+        update = self.scene.task(
+            t_s, nodes=nodes, triangles=triangles, site=site, goal=goal, grasp=grasp, force_n=force_n
+        )
+        self._send(TASK_TOPIC, update, t_s)
+
+    def log(self, t_s: float, message: str, *, warning: bool = False) -> None:
+        """An event (a hold, an intervention) as a Foxglove log message."""
+        if not self.sinks:
+            return
+        level = LogLevel.Warning if warning else LogLevel.Info
+        self._send(LOG_TOPIC, Log(timestamp=timestamp(t_s), level=level, message=message, name="tissue-retract"), t_s)

@@ -1,0 +1,78 @@
+"""The live view: a Foxglove WebSocket server on 127.0.0.1 that a client can subscribe to and read the scene from."""
+
+from __future__ import annotations
+
+import json
+import struct
+from typing import Any
+
+import numpy as np
+from websockets.sync.client import connect
+
+from psm_control.robot import PsmModel
+from sim.scene3d import PsmScene
+from sim.scene_stream import ARM_TOPIC, LOG_TOPIC, TASK_TOPIC, TRANSFORMS_TOPIC, LiveScene, SceneStream
+from tests.sim.test_scene3d import decode
+
+SUBPROTOCOL = "foxglove.sdk.v1"  # the SDK server's name for the Foxglove WebSocket protocol
+MESSAGE_DATA = 0x01  # the protocol's binary opcode of a subscribed message
+
+
+class Memory:
+    """A sink that keeps what it is given."""
+
+    def __init__(self) -> None:
+        self.messages: list[tuple[str, Any, float]] = []
+
+    def write_message(self, topic: str, message: Any, t_s: float) -> None:
+        self.messages.append((topic, message, t_s))
+
+
+def test_stream_sends_arm_shapes_once_a_second_and_frames_every_tick() -> None:
+    """Frames of both arms each tick; the shapes at the start and again after a second; a hold as a warning."""
+    memory = Memory()
+    model = PsmModel.from_variant("classic")
+    stream = SceneStream(PsmScene(model, "PSM1_base"), [memory])
+    for tick in range(25):
+        stream.tick(0.1 * tick, model.home(), 0.2, commanded_q=model.home())
+    stream.log(2.5, "HOLD: stale measured_js", warning=True)
+    topics = [topic for topic, _, _ in memory.messages]
+    assert topics.count(TRANSFORMS_TOPIC) == 50 and topics.count(TASK_TOPIC) == 25
+    assert [t for topic, _, t in memory.messages if topic == ARM_TOPIC] == [0.0, 0.0, 1.0, 1.0, 2.0, 2.0]
+    log = decode(memory.messages[-1][1])
+    assert memory.messages[-1][0] == LOG_TOPIC and log.message == "HOLD: stale measured_js" and log.level == 3
+
+
+def test_live_server_serves_the_scene_on_loopback() -> None:
+    """A client on ws://127.0.0.1 sees the scene's channels advertised and receives the arm's frames."""
+    model = PsmModel.from_variant("classic")
+    live = LiveScene(port=0)
+    try:
+        stream = SceneStream(PsmScene(model, "PSM1_base"), [live])
+        stream.tick(0.0, model.home(), 0.0)  # makes the channels, so they are advertised on connection
+        with connect(f"ws://127.0.0.1:{live.port}", subprotocols=[SUBPROTOCOL], open_timeout=60) as client:
+            channels: dict[str, Any] = {}
+            while TRANSFORMS_TOPIC not in channels:
+                message = json.loads(client.recv(timeout=60))
+                if message["op"] == "advertise":
+                    channels.update({c["topic"]: c for c in message["channels"]})
+            assert channels[TRANSFORMS_TOPIC]["schemaName"] == "foxglove.FrameTransforms"
+            assert channels[ARM_TOPIC]["schemaName"] == "foxglove.SceneUpdate"
+            subscription = {"id": 7, "channelId": channels[TRANSFORMS_TOPIC]["id"]}
+            client.send(json.dumps({"op": "subscribe", "subscriptions": [subscription]}))
+            frames = None
+            while frames is None:
+                # Ticks until the subscription is in effect: the client waits for a message, not for time.
+                stream.tick(1.0, model.home(), 0.0)
+                data = client.recv(timeout=60)
+                if isinstance(data, bytes) and data[0] == MESSAGE_DATA:
+                    subscription_id, _ = struct.unpack_from("<IQ", data, 1)
+                    assert subscription_id == 7
+                    frames = data[13:]
+    finally:
+        live.close()
+    sent = decode(PsmScene(model, "PSM1_base").transforms(1.0, model.home(), 0.0))
+    assert frames == sent.SerializeToString()
+    assert np.isclose(
+        sent.transforms[0].translation.z, model.configuration(model.home()).frame_pose_local("insertion_link")[2, 3]
+    )
