@@ -4,19 +4,22 @@
 :class:`sim.scene3d.PsmScene` and hands each to every sink. A sink takes ``(topic, message, t_s)``:
 the MCAP recorder writes the message's protobuf encoding under its Foxglove schema, and
 :class:`LiveScene` logs it to a Foxglove WebSocket server on 127.0.0.1, which the Foxglove app opens
-(``ws://127.0.0.1:PORT``).
+(``ws://127.0.0.1:PORT``). :class:`StreamScene` wraps a simulation environment to stream its scene.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from typing import Any, Protocol
 
 import foxglove
+import gymnasium as gym
 import numpy as np
 from foxglove import channels
 from foxglove.messages import Log, LogLevel
 
+from psm_control.errors import ConfigurationError
 from sim.scene3d import COMMANDED_PREFIX, PsmScene, timestamp
 
 __all__ = [
@@ -27,6 +30,7 @@ __all__ = [
     "LiveScene",
     "SceneSink",
     "SceneStream",
+    "StreamScene",
 ]
 
 #: The scene's topics: frames of the measured (and commanded) arm, link shapes, tissue and markers, events.
@@ -52,10 +56,18 @@ class LiveScene:
     Args:
         port: TCP port (0 picks a free one; see :attr:`port`).
         name: The server's name shown in the Foxglove app.
+
+    Raises:
+        ConfigurationError: The port is out of range or taken.
     """
 
     def __init__(self, port: int = 8765, name: str = "tissue-retract") -> None:
-        self._server = foxglove.start_server(name=name, host="127.0.0.1", port=port)
+        if not 0 <= port <= 65535:
+            raise ConfigurationError("live port", port, "a TCP port in 0-65535 (0 picks a free one)")
+        try:
+            self._server = foxglove.start_server(name=name, host="127.0.0.1", port=port)
+        except RuntimeError as e:  # the SDK reports a taken port as a RuntimeError
+            raise ConfigurationError("live port", port, f"a free TCP port on 127.0.0.1 ({e})") from e
         self._channels: dict[str, Any] = {}
 
     @property
@@ -135,3 +147,64 @@ class SceneStream:
             return
         level = LogLevel.Warning if warning else LogLevel.Info
         self._send(LOG_TOPIC, Log(timestamp=timestamp(t_s), level=level, message=message, name="tissue-retract"), t_s)
+
+
+class StreamScene(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray], np.ndarray]):
+    """Streams a tissue-retraction environment's 3-D scene to sinks after every reset and step.
+
+    The scene's root frame is the simulation's ``world``; its clock runs on across episodes by the
+    environment's step time (a recording's time must not go back).
+
+    Args:
+        env: A tissue-retraction environment (or a wrapper of one).
+        sinks: Where the scene goes (a recording, a :class:`LiveScene`).
+        realtime: Wait between steps so that the scene plays at the speed of the physics, for a person
+            watching live; the episodes' outcomes do not depend on it.
+    """
+
+    def __init__(self, env: gym.Env[Any, Any], sinks: Sequence[SceneSink], *, realtime: bool = False) -> None:
+        super().__init__(env)
+        simulation = env.unwrapped
+        self.stream = SceneStream(PsmScene(simulation.model, "world"), sinks)  # type: ignore[attr-defined]
+        physics = simulation.config.physics  # type: ignore[attr-defined]
+        self.step_s = physics.time_step_s * physics.substeps
+        self.realtime = realtime
+        self.t_s = 0.0
+        self._wall_start = time.monotonic()
+
+    def reset(self, **kwargs: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Reset, then stream the new scene (the clock moves on by one step)."""
+        observation, info = self.env.reset(**kwargs)
+        self._stream(info)
+        return observation, info
+
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """Step, then stream the scene."""
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self._stream(info)
+        return observation, float(reward), terminated, truncated, info
+
+    def _stream(self, info: dict[str, Any]) -> None:
+        self.t_s += self.step_s
+        simulation: Any = self.env.unwrapped
+        scene, backend = simulation.scene, simulation.backend
+        base = np.eye(4)
+        base[:3, 3] = scene.rcm_position
+        self.stream.scene.base_frame = base
+        goal = np.asarray(simulation.goal, dtype=float)
+        self.stream.tick(
+            self.t_s,
+            backend.q,
+            backend.jaw,
+            commanded_q=backend.q_target,
+            nodes=scene.tissue.positions(),
+            triangles=scene.tissue.triangles,
+            site=simulation.site_position(),
+            goal=goal if goal.shape == (3,) else None,
+            grasp=simulation.grasp_position(),
+            force_n=np.asarray(info.get("force_n", np.zeros(3)), dtype=float),
+        )
+        if self.realtime:
+            ahead = self.t_s - (time.monotonic() - self._wall_start)
+            if ahead > 0:  # pacing for a person watching, not synchronisation
+                time.sleep(ahead)

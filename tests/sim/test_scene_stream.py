@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import json
 import struct
+import subprocess
+import sys
 from typing import Any
 
 import numpy as np
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from websockets.sync.client import connect
 
 from psm_control.robot import PsmModel
@@ -61,14 +64,18 @@ def test_live_server_serves_the_scene_on_loopback() -> None:
             subscription = {"id": 7, "channelId": channels[TRANSFORMS_TOPIC]["id"]}
             client.send(json.dumps({"op": "subscribe", "subscriptions": [subscription]}))
             frames = None
-            while frames is None:
-                # Ticks until the subscription is in effect: the client waits for a message, not for time.
+            for _ in range(1000):  # a failure guard; each round waits for a message, not for a set time
+                # The protocol has no acknowledgement of a subscription: tick until a message comes through.
                 stream.tick(1.0, model.home(), 0.0)
-                data = client.recv(timeout=60)
+                try:
+                    data = client.recv(timeout=0.5)
+                except TimeoutError:
+                    continue
                 if isinstance(data, bytes) and data[0] == MESSAGE_DATA:
                     subscription_id, _ = struct.unpack_from("<IQ", data, 1)
                     assert subscription_id == 7
                     frames = data[13:]
+                    break
     finally:
         live.close()
     sent = decode(PsmScene(model, "PSM1_base").transforms(1.0, model.home(), 0.0))
@@ -76,3 +83,45 @@ def test_live_server_serves_the_scene_on_loopback() -> None:
     assert np.isclose(
         sent.transforms[0].translation.z, model.configuration(model.home()).frame_pose_local("insertion_link")[2, 3]
     )
+
+
+def test_evaluate_live_serves_the_simulation_scene() -> None:
+    """evaluate --live prints its address, and a client subscribed to the task topic sees the tissue flap."""
+    command = [sys.executable, "-m", "tissue_retract", "evaluate", "--policy", "scripted", "--task", "lift"]
+    # Twenty real-time episodes (minutes of streaming) so the run outlasts the client's subscription by far;
+    # the test ends it once a message has come through.
+    command += ["--episodes", "20", "--seeds", "1", "--live", "0"]
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
+        try:
+            assert process.stdout is not None
+            line = ""
+            while not line.startswith("live: ws://127.0.0.1:"):
+                line = process.stdout.readline()
+                assert line, process.stderr.read() if process.stderr else "evaluate ended before serving"
+            address = line.split()[1]
+            with connect(address, subprotocols=[SUBPROTOCOL], open_timeout=120) as client:
+                channels: dict[str, Any] = {}
+                while TASK_TOPIC not in channels:
+                    message = json.loads(client.recv(timeout=120))
+                    if message["op"] == "advertise":
+                        channels.update({c["topic"]: c for c in message["channels"]})
+                client.send(
+                    json.dumps(
+                        {"op": "subscribe", "subscriptions": [{"id": 1, "channelId": channels[TASK_TOPIC]["id"]}]}
+                    )
+                )
+                data = client.recv(timeout=120)
+                while not (isinstance(data, bytes) and data[0] == MESSAGE_DATA):
+                    data = client.recv(timeout=120)
+        finally:
+            process.kill()
+    update = PsmScene(PsmModel.from_variant("classic"), "world").task(0.0)  # an empty update, for its schema
+    schema = update.get_schema()
+    files = descriptor_pb2.FileDescriptorSet.FromString(bytes(schema.data))
+    pool = descriptor_pool.DescriptorPool()
+    for file in files.file:
+        pool.Add(file)
+    received = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name)).FromString(data[13:])
+    entities = {entity.id: entity for entity in received.entities}
+    assert {"tissue", "site", "goal"} <= set(entities)
+    assert len(entities["tissue"].triangles[0].points) == 49  # the 7 x 7 flap

@@ -20,6 +20,7 @@ from policies.resolve import resolve_policy
 from psm_control.errors import ConfigurationError
 from safety.config import load_safety_config
 from sim.evaluation import run_episode, summarize, timed
+from sim.scene_stream import LiveScene, StreamScene
 
 __all__ = ["add_arguments", "run"]
 
@@ -35,6 +36,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml), e.g. force_limit_n"
     )
     parser.add_argument("--json", metavar="FILE", default=None, help="write {summary, episodes} as JSON")
+    parser.add_argument(
+        "--live",
+        type=int,
+        nargs="?",
+        const=8765,
+        default=None,
+        metavar="PORT",
+        help="serve the 3-D scene for the Foxglove app on ws://127.0.0.1:PORT (default 8765), in real time",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -48,6 +58,11 @@ def run(args: argparse.Namespace) -> int:
     if args.no_safety:
         console.print("[bold red]ABLATION: safety filter OFF[/] - commands reach the joints unfiltered")
     env = sim.envs.make(args.task, safety=not args.no_safety, safety_config=safety_config)
+    live = None
+    if args.live is not None:
+        live = LiveScene(port=args.live)
+        env = StreamScene(env, [live], realtime=True)
+        print(f"live: ws://127.0.0.1:{live.port} (open it in the Foxglove app)", flush=True)
     try:
         policy, reset = resolve_policy(args.policy, env)
         seeds = [s * 100000 + i for s in args.seeds for i in range(args.episodes)]
@@ -56,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
         force_limit_n = env.unwrapped.controller.config.effective_force_limit_n
     finally:
         env.close()
+        if live is not None:
+            live.close()
     summary = summarize(results, elapsed)
     summary.update(
         task=sim.envs.gym_id(args.task),
