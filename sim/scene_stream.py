@@ -96,12 +96,16 @@ class SceneStream:
     Args:
         scene: Builds the messages.
         sinks: Where they go.
+        period_s: Least time between two streamed ticks [s]; ticks closer than this to the last one are
+            skipped (a 1 kHz control loop need not draw every tick). 0 streams every tick.
     """
 
-    def __init__(self, scene: PsmScene, sinks: Sequence[SceneSink]) -> None:
+    def __init__(self, scene: PsmScene, sinks: Sequence[SceneSink], period_s: float = 0.0) -> None:
         self.scene = scene
         self.sinks = list(sinks)
+        self.period_s = float(period_s)
         self._arm_sent_s = -np.inf
+        self._tick_sent_s = -np.inf
 
     def _send(self, topic: str, message: Any, t_s: float) -> None:
         for sink in self.sinks:
@@ -126,8 +130,9 @@ class SceneStream:
 
         Positions are in the scene's root frame [m]; see :meth:`sim.scene3d.PsmScene.task`.
         """
-        if not self.sinks:
+        if not self.sinks or t_s - self._tick_sent_s < self.period_s:
             return
+        self._tick_sent_s = t_s
         if t_s - self._arm_sent_s >= _ARM_REPEAT_S:
             self._send(ARM_TOPIC, self.scene.arm(t_s), t_s)
             self._send(ARM_TOPIC, self.scene.arm(t_s, prefix=COMMANDED_PREFIX), t_s)

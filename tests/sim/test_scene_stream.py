@@ -46,6 +46,16 @@ def test_stream_sends_arm_shapes_once_a_second_and_frames_every_tick() -> None:
     assert memory.messages[-1][0] == LOG_TOPIC and log.message == "HOLD: stale measured_js" and log.level == 3
 
 
+def test_stream_skips_ticks_closer_than_its_period() -> None:
+    """At a 1 kHz tick and a 50 ms period, one tick in fifty is streamed."""
+    memory = Memory()
+    model = PsmModel.from_variant("classic")
+    stream = SceneStream(PsmScene(model, "PSM1_base"), [memory], period_s=0.05)
+    for tick in range(1000):
+        stream.tick(0.001 * tick, model.home(), 0.0)
+    assert sum(topic == TRANSFORMS_TOPIC for topic, _, _ in memory.messages) == 20
+
+
 def test_live_server_serves_the_scene_on_loopback() -> None:
     """A client on ws://127.0.0.1 sees the scene's channels advertised and receives the arm's frames."""
     model = PsmModel.from_variant("classic")
