@@ -39,6 +39,7 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "p95": float(np.percentile(forces, 95)) if forces else None,
         },
         "safety_stops": sum(int(r.get("safety_stops") or 0) for r in finished),
+        "invalid_actions": sum(int(r.get("invalid_actions") or 0) for r in finished),
         "interventions": dict(sorted(interventions.items())),
         "failure_classes": dict(sorted(Counter(str(r.get("failure_class", "none")) for r in finished).items())),
     }
@@ -107,6 +108,7 @@ def write_report(
         f"- success: {100 * summary['success_rate']:.1f} % (95 % CI {100 * low:.1f} to {100 * high:.1f} %)",
         f"- peak force [N]: {summary['peak_force_n']}",
         f"- safety stops: {summary['safety_stops']}",
+        f"- invalid actions: {summary['invalid_actions']}",
         f"- interventions: {summary['interventions']}",
         f"- failure classes: {summary['failure_classes']}",
         "",
