@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 from crtk_msgs.msg import OperatingState, StringStamped  # type: ignore[import-untyped]
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -56,6 +57,7 @@ class PsmClient(Node):
         node_name: ROS node name; default ``<arm>_client``.
         listen_only: Create no command publishers at all (a dry run): the client only subscribes, and
             every command method raises :class:`~hardware_if.errors.DvrkError`.
+        context: The rclpy context (default: the global one), e.g. one per ROS domain.
 
     Use as a context manager (or call :meth:`start` and :meth:`close`).
     """
@@ -69,9 +71,10 @@ class PsmClient(Node):
         on_measured: Callable[[JointState, float], None] | None = None,
         node_name: str | None = None,
         listen_only: bool = False,
+        context: Context | None = None,
     ) -> None:
         self.topics = ArmTopics(arm)
-        super().__init__(node_name or f"{arm.lower()}_client")
+        super().__init__(node_name or f"{arm.lower()}_client", context=context)
         self._lock = threading.Condition()
         timeout_s = SafetyConfig().deadman_timeout_s if deadman_timeout_s is None else deadman_timeout_s
         self._deadman = Deadman(timeout_s=timeout_s)
@@ -468,6 +471,9 @@ class PsmClient(Node):
     def _request(self, command: str, done: Callable[[OperatingState], bool], timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
         with self._lock:
+            # A state change (enable, home) is not a servo stream: the deadman watches again from the next
+            # servo command on, instead of holding an arm that is homing on request.
+            self._commanding = False
             # Only a state published after the command counts: an arm already homed re-homes first.
             seen = self._state_count
             while True:
