@@ -160,7 +160,8 @@ class Fault:
         target: ``dvrk`` (against a sim-dvrk child) or ``sim``.
         policy: The faulty policy (a class of this module).
         action: What the runner does when the policy's line appears: ``""`` (the policy is the fault),
-            ``nan:<topic>``, ``tracking``, ``disable``, ``kill-console``, ``signal:<NAME>``, ``kill-deploy``.
+            ``nan:<topic>``, ``early:<topic>`` (a NaN as the deploy starts), ``tracking``, ``disable``,
+            ``kill-console``, ``signal:<NAME>``, ``kill-deploy``.
         status: Expected exit status.
         reason: Text the hold (or interruption) reason must contain.
         episodes: Episodes of the deploy.
@@ -226,6 +227,7 @@ FAULTS: tuple[Fault, ...] = (
             "body/measured_cf",
         )
     ),
+    Fault("NaN on measured_js at start-up", "dvrk", "Gate", 4, "invalid data: measured_js", action="early:measured_js"),
     Fault("tracking error", "dvrk", "Gate", 4, "tracking error", action="tracking"),
     Fault("arm disabled mid-episode", "dvrk", "Gate", 4, "not ready", action="disable"),
     Fault(
@@ -426,13 +428,13 @@ def run_fault(fault: Fault, workdir: Path, domain_id: int, *, guard_s: float = 3
             console = _start([*server, "--task", "lift", "--seed", str(SEED)], env)
             if "--dry-run" in fault.extra and "not ready" not in fault.reason:
                 _enable(domain_id, guard_s)
-        if fault.action.startswith(("nan:", "tracking", "disable")):
+        if fault.action.startswith(("nan:", "early:", "tracking", "disable")):
             injector = _Injector(domain_id)
         process = _start(deploy, env)
         lines = _Lines(process)
-        if fault.action:
-            lines.wait_for(MARK, guard_s)
-        if fault.action.startswith("nan:") and injector is not None:
+        if fault.action and not fault.action.startswith("early:"):
+            lines.wait_for(MARK, guard_s)  # mid-episode: after the ticks of the steps before the fault step
+        if fault.action.startswith(("nan:", "early:")) and injector is not None:
             topic = fault.action.split(":", 1)[1]
             publisher, message = injector.publisher(topic)
             injector.flood(publisher, message, lines, "invalid data", guard_s)
