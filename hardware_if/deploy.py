@@ -449,17 +449,21 @@ def _deploy_dvrk(
                         client.home(options.wait_s)  # back to the task's start joints
                     except DvrkError as e:
                         raise HoldError("not ready", f"episode {episode}: {e}") from None
-                asked = time.monotonic()
-                if listener.request_reset(seed) and not listener.wait(options.wait_s, after_s=asked + 0.05):
-                    raise HoldError(
-                        "not ready", f"no task state after a reset on /{options.arm}/task/ in {options.wait_s:g} s"
-                    )
                 if not listener.wait(options.wait_s):
                     raise HoldError(
                         "not ready", f"no task topics /{options.arm}/task/site and goal in {options.wait_s:g} s"
                     )
+                after = float("-inf")
+                if not options.dry_run and listener.serves_resets():
+                    # The simulated dVRK: a new scene, and only task and arm states of that scene from here on.
+                    try:
+                        after = listener.reset_and_wait(seed, options.wait_s)
+                    except DvrkError as e:
+                        raise HoldError("not ready", f"episode {episode}: {e}") from None
+                    if not listener.wait(options.wait_s, after_s=after):
+                        raise HoldError("not ready", f"no task state after the reset in {options.wait_s:g} s")
                 # The arm must be ENABLED, homed, idle and valid before the first command of an episode.
-                reason = client.wait_ready(options.wait_s)
+                reason = client.wait_ready(options.wait_s, after_s=after)
                 if reason:
                     fault = _deadman_hold(reason)
                     fault.data.update(episode=episode, seed=seed)

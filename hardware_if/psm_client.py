@@ -426,8 +426,12 @@ class PsmClient(Node):
                 self._lock.wait(remaining)
         return self.measure()
 
-    def wait_ready(self, timeout_s: float) -> str:
+    def wait_ready(self, timeout_s: float, *, after_s: float = float("-inf")) -> str:
         """Wait until the arm is fresh, present, ENABLED, homed, idle and tracking, with valid data.
+
+        Args:
+            timeout_s: How long to wait [s].
+            after_s: Judge only a ``measured_js`` that arrived after this ``time.monotonic`` [s].
 
         Returns:
             "" when ready; otherwise the reason it was not within ``timeout_s`` (at once for invalid data,
@@ -437,6 +441,8 @@ class PsmClient(Node):
         with self._lock:
             while True:
                 reason = self._deadman.check(self._facts())
+                if not reason and (self._measured_rx_s or float("-inf")) <= after_s:
+                    reason = "no measurement: no measured_js since the episode's reset"
                 if not reason and self._state.is_busy:
                     reason = "not ready: operating state busy (a move or homing is running)"
                 if not reason or self._data_fault:

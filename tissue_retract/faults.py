@@ -265,6 +265,7 @@ class _Lines:
 
     def __init__(self, process: subprocess.Popen[str]) -> None:
         self.lines: list[str] = []
+        self.ended = False
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._thread = threading.Thread(target=self._read, args=(process,), daemon=True)
         self._thread.start()
@@ -285,6 +286,7 @@ class _Lines:
             except queue.Empty:
                 return False
             if line is None:
+                self.ended = True
                 self._queue.put(None)
                 return False
             self.lines.append(line)
@@ -368,7 +370,7 @@ class _Injector:
     def flood(self, publisher: Any, message: Any, lines: _Lines, text: str, timeout_s: float) -> bool:
         """Publish ``message`` until the deploy's output shows ``text`` (the client saw it)."""
         deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not lines.ended:
             if publisher.get_subscription_count() > 0:
                 publisher.publish(message)
             if lines.wait_for(text, 0.002):
