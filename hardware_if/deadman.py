@@ -95,6 +95,8 @@ class Deadman:
             return facts.data_fault
         if facts.publishers == 0:
             return "publisher gone: nobody publishes measured_js"
+        if facts.publishers > 1:
+            return f"publisher conflict: {facts.publishers} publishers of measured_js (one arm allowed)"
         if facts.measured_rx_s is None or facts.measured_q is None:
             return "no measurement: measured_js never received"
         age = facts.now_s - facts.measured_rx_s
