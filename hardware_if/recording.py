@@ -158,19 +158,19 @@ class RecordingRead:
             self.truncated = True
             f.seek(0)
             channels: dict[int, str] = {}
-            rows: list[tuple[int, str, float, dict[str, Any]]] = []
+            rows: list[tuple[int, str, dict[str, Any]]] = []
             try:
                 for record in StreamReader(f, skip_magic=False).records:
                     if isinstance(record, Channel):
                         channels[record.id] = record.topic
                     elif isinstance(record, Message) and record.channel_id in channels:
-                        rows.append((record.log_time, channels[record.channel_id], 0.0, json.loads(record.data)))
+                        rows.append((record.log_time, channels[record.channel_id], json.loads(record.data)))
                     elif isinstance(record, Footer):
                         self.truncated = False
             except (McapError, EOFError, ValueError, struct_error):
                 pass  # the torn record at the end: everything before it is kept
             rows.sort(key=lambda row: row[0])
-            self.messages = [(topic, t * 1e-9, payload) for t, topic, _, payload in rows]
+            self.messages = [(topic, t * 1e-9, payload) for t, topic, payload in rows]
 
     def __iter__(self) -> Iterator[tuple[str, float, dict[str, Any]]]:
         return iter(self.messages)
