@@ -16,6 +16,7 @@ import numpy as np
 
 from hardware_if.crtk import JOINT_NAMES, TRACKING_TOLERANCE
 from psm_control.errors import ConfigurationError
+from safety.config import SafetyConfig
 
 __all__ = ["ArmFacts", "Deadman", "DeadmanStatus"]
 
@@ -31,6 +32,7 @@ class ArmFacts(NamedTuple):
         is_homed: Latest ``operating_state.is_homed``.
         measured_q: Latest measured joints (6,), or None.
         setpoint_q: Latest ``setpoint_js`` joints (6,), or None.
+        data_fault: The first malformed or non-finite message on a subscribed topic ("" if none).
     """
 
     now_s: float
@@ -40,6 +42,7 @@ class ArmFacts(NamedTuple):
     is_homed: bool
     measured_q: np.ndarray | None
     setpoint_q: np.ndarray | None
+    data_fault: str = ""
 
 
 class DeadmanStatus(NamedTuple):
@@ -63,7 +66,8 @@ class Deadman:
     """Latching deadman over the dVRK's state, with the dVRK's own tracking tolerances.
 
     Args:
-        timeout_s: Largest allowed age of the latest ``measured_js`` [s]; default 0.1 s (10 periods
+        timeout_s: Largest allowed age of the latest ``measured_js`` [s]; default the chain's
+            ``SafetyConfig.deadman_timeout_s`` (0.05 s, 5 periods
             of the dVRK's 100 Hz publication).
         tracking_tolerance: Largest |measured - setpoint| per joint before tripping; default the dVRK's
             (0.5 rad yaw/pitch, 0.05 m insertion, 0.6 rad roll and wrist).
@@ -72,7 +76,7 @@ class Deadman:
         ConfigurationError: A non-positive timeout or a tolerance not of shape (6,) and positive.
     """
 
-    timeout_s: float = 0.1
+    timeout_s: float = SafetyConfig.deadman_timeout_s
     tracking_tolerance: np.ndarray = field(default_factory=lambda: TRACKING_TOLERANCE.copy())
     _hold_reason: str = field(default="", init=False)
     _hold_since_s: float = field(default=float("nan"), init=False)
@@ -87,8 +91,12 @@ class Deadman:
 
     def check(self, facts: ArmFacts) -> str:
         """The first rule the facts break, or "" when commanding is safe (no latching)."""
+        if facts.data_fault:
+            return facts.data_fault
         if facts.publishers == 0:
             return "publisher gone: nobody publishes measured_js"
+        if facts.publishers > 1:
+            return f"publisher conflict: {facts.publishers} publishers of measured_js (one arm allowed)"
         if facts.measured_rx_s is None or facts.measured_q is None:
             return "no measurement: measured_js never received"
         age = facts.now_s - facts.measured_rx_s

@@ -13,16 +13,27 @@ report counts the commands it would have sent, the chain's safety interventions 
 force (measured force plus the chain's conservative stiffness prior times how far the command would
 pull the grasped tool from where it is).
 
-The deadman (:mod:`hardware_if.deadman`) turns a stale or vanished arm, an arm not ENABLED and homed,
-or a tracking error into a hold; the deploy then stops, records the fault and returns
-:data:`EXIT_HOLD`. Every run is recorded (:mod:`hardware_if.recording`).
+One fault path, the same for the simulation, the dVRK and a dry run: a policy that raises (anything,
+``SystemExit`` included) or returns something other than 5 finite numbers, a policy step slower than its
+budget (default one policy period), malformed or non-finite data on any subscribed topic, an arm not
+ENABLED, homed and idle when an episode starts (waited for up to ``wait_s``), a stale or vanished arm, a
+tracking error (the deadman, :mod:`hardware_if.deadman`), or any other error while the arm is commanded
+all end the same way: nothing new is commanded (the arm keeps the last verified command), the fault is
+recorded as a ``hold`` event with its reason and data, the report says ``HOLD: <reason>`` and the exit
+status is :data:`EXIT_HOLD`. SIGINT, SIGTERM and SIGHUP stop between two control ticks, close the
+recording and exit with 128 + the signal number (130, 143, 129). Every run is recorded
+(:mod:`hardware_if.recording`).
 """
 
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
+import signal
+import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,6 +41,7 @@ from typing import Any
 import numpy as np
 
 import sim.envs
+from hardware_if.errors import DvrkError, HoldError
 from hardware_if.recording import Recorder
 from hardware_if.session import ros_session
 from policies.resolve import resolve_policy
@@ -40,12 +52,65 @@ from safety.config import SafetyConfig
 from sim.evaluation import run_episode
 from sim.scene import PhysicsParams
 
-__all__ = ["EXIT_HOLD", "DeployOptions", "DeployReport", "deploy"]
+__all__ = ["EXIT_HOLD", "EXIT_INTERRUPTED", "STOP_SIGNALS", "DeployOptions", "DeployReport", "Interrupted", "deploy"]
 
 #: Exit status of a deploy that stopped because the deadman held the arm.
 EXIT_HOLD = 4
-#: Exit status of a deploy stopped with Ctrl-C.
+#: Exit status of a deploy stopped with Ctrl-C (SIGINT); SIGTERM gives 143 and SIGHUP 129 (128 + signal).
 EXIT_INTERRUPTED = 130
+#: Signals that stop a deploy between two ticks, as Ctrl-C does.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Interrupted(KeyboardInterrupt):
+    """A stop signal arrived (SIGINT, SIGTERM or SIGHUP): stop commanding between two ticks.
+
+    Attributes:
+        signum: The signal's number.
+    """
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+class _Stopper:
+    """Turns stop signals into :class:`Interrupted`, never in the middle of a control tick.
+
+    Outside a tick the signal raises at once (a wait for the arm is cut short); inside one
+    (``with stopper.tick():``) it is noted and raised when the tick has been sent and recorded.
+    """
+
+    def __init__(self) -> None:
+        self.signum = 0
+        self._in_tick = False
+
+    def _handle(self, signum: int, _frame: Any) -> None:
+        self.signum = self.signum or signum
+        if not self._in_tick:
+            raise Interrupted(self.signum)
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[_Stopper]:
+        if threading.current_thread() is not threading.main_thread():
+            yield self  # signals are delivered to the main thread only: nothing to install
+            return
+        previous = {sig: signal.signal(sig, self._handle) for sig in STOP_SIGNALS}
+        try:
+            yield self
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+    @contextlib.contextmanager
+    def tick(self) -> Iterator[None]:
+        self._in_tick = True
+        try:
+            yield
+        finally:
+            self._in_tick = False
+        if self.signum:
+            raise Interrupted(self.signum)
 
 
 @dataclass(frozen=True)
@@ -63,7 +128,9 @@ class DeployOptions:
         record: MCAP output file.
         episodes: Number of episodes.
         seed: Seed of the first episode.
-        wait_s: How long to wait for the arm's first measurement and the task topics [s].
+        wait_s: How long to wait for the arm's first measurement, the task topics, and for the arm to be
+            ENABLED, homed and idle at each episode start [s]; running out is a hold.
+        policy_budget_s: Longest a policy step may take [s]; None: one policy period. Slower is a hold.
     """
 
     policy: str
@@ -77,8 +144,11 @@ class DeployOptions:
     episodes: int = 1
     seed: int = 0
     wait_s: float = 30.0
+    policy_budget_s: float | None = None
 
     def __post_init__(self) -> None:
+        if self.policy_budget_s is not None and not (np.isfinite(self.policy_budget_s) and self.policy_budget_s > 0):
+            raise ConfigurationError("policy_budget_s", self.policy_budget_s, "a finite number of seconds > 0")
         if self.target not in ("sim", "dvrk"):
             raise ConfigurationError("target", self.target, "'sim' or 'dvrk'")
         if self.dry_run and self.target != "dvrk":
@@ -103,12 +173,15 @@ class DeployReport:
     predicted_peak_force_n: float = 0.0
     fault: str = ""
     interrupted: bool = False
+    signal: str = ""
+    holds: int = 0
+    invalid_actions: int = 0
 
     @property
     def exit_code(self) -> int:
-        """0 when every episode ran to its end, :data:`EXIT_HOLD` on a hold, 130 on Ctrl-C."""
+        """0 when every episode ran to its end, :data:`EXIT_HOLD` on a hold, 128 + signal on a stop signal."""
         if self.interrupted:
-            return EXIT_INTERRUPTED
+            return 128 + int(signal.Signals[self.signal or "SIGINT"])
         return EXIT_HOLD if self.fault else 0
 
     def to_dict(self) -> dict[str, Any]:
@@ -138,13 +211,15 @@ class DeployReport:
         )
         top = ", ".join(f"{k} x{v}" for k, v in self.interventions.most_common()) or "none"
         out.append(f"  safety: {self.safety_stops} stop tick(s); interventions: {top}")
+        out.append(f"  holds: {self.holds}; invalid actions: {self.invalid_actions}")
         out.append(f"  peak measured force {self.peak_force_n:.3f} N")
         if self.dry_run:
             out.append(f"  predicted peak force {self.predicted_peak_force_n:.3f} N")
         if self.fault:
             out.append(f"  HOLD: {self.fault}")
         if self.interrupted:
-            out.append("  interrupted (Ctrl-C): stopped commanding")
+            name = "Ctrl-C" if self.signal in ("", "SIGINT") else self.signal
+            out.append(f"  interrupted ({name}): stopped commanding between two ticks")
         return out
 
 
@@ -184,46 +259,118 @@ def _account(report: DeployReport, recorder: Recorder, output: ControlOutput) ->
 
 
 def deploy(options: DeployOptions, *, echo: Any = print) -> DeployReport:
-    """Run the deploy and record it; ``echo`` shows progress lines (default ``print``)."""
+    """Run the deploy and record it; ``echo`` shows progress lines (default ``print``).
+
+    Raises:
+        ConfigurationError: The policy or task cannot be set up (before the arm is commanded).
+    """
     report = DeployReport(options.target, options.dry_run, options.record)
-    with Recorder(options.record) as recorder:
+    stopper = _Stopper()
+    with stopper.installed(), Recorder(options.record) as recorder:
         meta = {
             k: (str(v) if isinstance(v, Path | SafetyConfig) else v) for k, v in dataclasses.asdict(options).items()
         }
         recorder.write("/deploy/meta", meta)
         try:
-            if options.target == "sim":
-                _deploy_sim(options, report, recorder, echo)
-            else:
-                _deploy_dvrk(options, report, recorder, echo)
-        except KeyboardInterrupt:
+            try:
+                if options.target == "sim":
+                    _deploy_sim(options, report, recorder, echo, stopper)
+                else:
+                    _deploy_dvrk(options, report, recorder, echo, stopper)
+            except HoldError as e:
+                _hold(report, recorder, e)
+            except (KeyboardInterrupt, ConfigurationError):
+                raise
+            except Exception as e:  # anything else while commanding is a hold too, never a traceback
+                _hold(report, recorder, HoldError("fault", f"{type(e).__name__}: {e}"))
+        except KeyboardInterrupt as e:
             report.interrupted = True
-            recorder.write("/deploy/event", {"kind": "interrupted", "text": "Ctrl-C"})
+            report.signal = signal.Signals(e.signum).name if isinstance(e, Interrupted) else "SIGINT"
+            text = "Ctrl-C" if report.signal == "SIGINT" else report.signal
+            recorder.write("/deploy/event", {"kind": "interrupted", "text": text, "signal": report.signal})
+        except ConfigurationError as e:
+            recorder.write("/deploy/event", {"kind": "error", "text": str(e)})
+            recorder.write("/deploy/report", report.to_dict())
+            raise
         recorder.write("/deploy/report", report.to_dict())
     return report
 
 
+def _hold(report: DeployReport, recorder: Recorder, fault: HoldError) -> None:
+    """Record a hold: the reason in the report (exit 4) and the event with its data in the recording."""
+    report.fault = str(fault)
+    report.holds += 1
+    recorder.write("/deploy/event", {"kind": "hold", "text": str(fault), "fault": fault.kind, "data": fault.data})
+
+
+def _deadman_hold(reason: str) -> HoldError:
+    """The hold of a deadman verdict such as ``"stale: measured_js 0.4 s old"``."""
+    kind, _, detail = reason.partition(": ")
+    return HoldError(kind, detail or reason)
+
+
+def _checked_policy(policy: Callable[[Any], Any], budget_s: float) -> Callable[[Any], np.ndarray]:
+    """The policy, with its step checked: it must return 5 finite numbers within ``budget_s``.
+
+    The run's first step is not timed: nothing moves before its action, and a network's first call
+    loads and prepares its kernels (a torch policy's takes about 0.2 s).
+    """
+    calls = [0]
+
+    def checked(observation: Any) -> np.ndarray:
+        calls[0] += 1
+        started = time.monotonic()
+        try:
+            raw = policy(observation)
+        except KeyboardInterrupt:
+            raise
+        except BaseException as e:  # SystemExit included: a policy ends its episode, never the program
+            raise HoldError("policy error", f"the policy raised {type(e).__name__}: {e}") from None
+        elapsed = time.monotonic() - started
+        try:
+            action = np.asarray(raw, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise HoldError("invalid action", f"{str(raw)[:80]!r} is not numbers (allowed: 5 finite numbers)") from None
+        if action.shape != (5,) or not np.all(np.isfinite(action)):
+            raise HoldError(
+                "invalid action",
+                f"shape {action.shape} with {int(np.sum(~np.isfinite(action)))} non-finite value(s) "
+                "(allowed: 5 finite numbers)",
+                {"action": action},
+            )
+        if elapsed > budget_s and calls[0] > 1:
+            raise HoldError(
+                "policy overrun",
+                f"the policy step took {elapsed:.3f} s, budget {budget_s:.3f} s",
+                {"elapsed_s": elapsed, "budget_s": budget_s},
+            )
+        return action
+
+    return checked
+
+
 # -- simulation -------------------------------------------------------------------------------------
 class _RecordingChain:
-    """Forwards to the environment's control chain and records every tick."""
+    """Forwards to the environment's control chain and records every tick (a stop signal waits for its end)."""
 
-    def __init__(self, chain: Any, report: DeployReport, recorder: Recorder) -> None:
-        self._chain, self._report, self._recorder = chain, report, recorder
+    def __init__(self, chain: Any, report: DeployReport, recorder: Recorder, stopper: _Stopper) -> None:
+        self._chain, self._report, self._recorder, self._stopper = chain, report, recorder, stopper
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._chain, name)
 
     def tick(self, measured: MeasuredState) -> ControlOutput:
-        output: ControlOutput = self._chain.tick(measured)
-        self._recorder.write("/deploy/measured", _measured_payload(measured))
-        self._recorder.write("/deploy/command", _command_payload(output, sent=True))
-        _account(self._report, self._recorder, output)
-        self._report.commands_sent += 1
-        self._report.peak_force_n = max(self._report.peak_force_n, float(np.linalg.norm(measured.force_n)))
+        with self._stopper.tick():
+            output: ControlOutput = self._chain.tick(measured)
+            self._recorder.write("/deploy/measured", _measured_payload(measured))
+            self._recorder.write("/deploy/command", _command_payload(output, sent=True))
+            _account(self._report, self._recorder, output)
+            self._report.commands_sent += 1
+            self._report.peak_force_n = max(self._report.peak_force_n, float(np.linalg.norm(measured.force_n)))
         return output
 
 
-def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder, echo: Any) -> None:
+def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder, echo: Any, stopper: _Stopper) -> None:
 
     overrides: dict[str, Any] = {"safety_config": options.safety_config}
     if options.rate_hz is not None:
@@ -233,11 +380,17 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
         policy, reset = resolve_policy(options.policy, env)
         env.reset(seed=options.seed)  # builds the chain once; wrap it so every tick is recorded
         unwrapped = env.unwrapped
-        unwrapped.controller = _RecordingChain(unwrapped.controller, report, recorder)
+        unwrapped.controller = _RecordingChain(unwrapped.controller, report, recorder, stopper)
+        budget = options.policy_budget_s or unwrapped.config.physics.step_s
+        checked = _checked_policy(policy, budget)
         step = {"episode": 0, "n": 0}
 
         def recorded_policy(observation: dict[str, np.ndarray]) -> np.ndarray:
-            action = np.asarray(policy(observation))
+            try:
+                action = checked(observation)
+            except HoldError as e:
+                e.data.update(episode=step["episode"], step=step["n"], observation=observation)
+                raise
             recorder.write(
                 "/deploy/action",
                 {"episode": step["episode"], "step": step["n"], "action": action, "observation": observation},
@@ -249,9 +402,11 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
             seed = options.seed + episode
             step.update(episode=episode, n=0)
             recorder.write("/deploy/event", {"kind": "episode_start", "episode": episode, "seed": seed})
+            echo(f"episode {episode}: started (seed {seed})")
             result = run_episode(env, recorded_policy, reset, seed)
             entry = {"episode": episode, **result.to_dict()}
             report.episodes.append(entry)
+            report.invalid_actions += int(entry.get("invalid_actions", 0))
             recorder.write("/deploy/event", {"kind": "episode_end", **entry})
             echo(f"episode {episode}: success={result.success} peak force {result.peak_force_n:.3f} N")
     finally:
@@ -259,7 +414,9 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
 
 
 # -- dVRK over ROS 2 ---------------------------------------------------------------------------------
-def _deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder, echo: Any) -> None:
+def _deploy_dvrk(
+    options: DeployOptions, report: DeployReport, recorder: Recorder, echo: Any, stopper: _Stopper
+) -> None:
     # These import rclpy (the ros extra), which must come after the ROS environment is set.
     from hardware_if.psm_client import PsmClient
     from hardware_if.remote_task import RemoteTask, TaskListener
@@ -267,47 +424,66 @@ def _deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorde
     rate_hz = options.rate_hz if options.rate_hz is not None else 100.0
     base = options.safety_config if options.safety_config is not None else SafetyConfig()
     config = dataclasses.replace(base, control_rate_hz=rate_hz)
-    faults: list[str] = []
-
-    def on_fault(status: Any) -> None:
-        faults.append(status.reason)
 
     with ros_session(signal_handlers=False):
-        client = PsmClient(options.arm, on_fault=on_fault, listen_only=options.dry_run).start()
+        client = PsmClient(options.arm, deadman_timeout_s=config.deadman_timeout_s, listen_only=options.dry_run)
+        client.start()
         listener = TaskListener(options.arm, listen_only=options.dry_run)
         try:
-            client.wait_for_measurement(options.wait_s)
+            try:
+                client.wait_for_measurement(options.wait_s)
+            except DvrkError as e:
+                raise HoldError("not ready", str(e)) from None
             state, homed, _ = client.operating_state()
             echo(f"{options.arm}: operating state {state or 'unknown'}, {'homed' if homed else 'not homed'}")
-            if not options.dry_run and not (state == "ENABLED" and homed):
-                echo(f"{options.arm}: enable and home")
-                client.enable(options.wait_s)
-                client.home(options.wait_s)
             view = RemoteTask(options.task, client, listener)
             policy, reset = resolve_policy(options.policy, view)
+            budget = options.policy_budget_s or view.config.physics.step_s
+            checked = _checked_policy(policy, budget)
+            if not options.dry_run and not (state == "ENABLED" and homed):
+                echo(f"{options.arm}: enable and home")
+                try:
+                    client.enable(options.wait_s)
+                    client.home(options.wait_s)
+                except DvrkError as e:
+                    raise HoldError("not ready", str(e)) from None
             chain = ControlChain(config)
             for episode in range(options.episodes):
                 seed = options.seed + episode
                 if episode > 0 and not options.dry_run:
-                    client.home(options.wait_s)
-                asked = time.monotonic()
-                if listener.request_reset(seed) and not listener.wait(options.wait_s, after_s=asked + 0.05):
-                    raise ConfigurationError("task", options.task, f"task topics under /{options.arm}/task/")
+                    try:
+                        client.home(options.wait_s)  # back to the task's start joints
+                    except DvrkError as e:
+                        raise HoldError("not ready", f"episode {episode}: {e}") from None
                 if not listener.wait(options.wait_s):
-                    raise ConfigurationError(
-                        "task", options.task, f"task topics /{options.arm}/task/site and goal (none received)"
+                    raise HoldError(
+                        "not ready", f"no task topics /{options.arm}/task/site and goal in {options.wait_s:g} s"
                     )
-                time.sleep(0.1)  # let a reset scene's first state arrive everywhere
+                after = float("-inf")
+                if not options.dry_run and listener.serves_resets():
+                    # The simulated dVRK: a new scene, and only task and arm states of that scene from here on.
+                    try:
+                        after = listener.reset_and_wait(seed, options.wait_s)
+                    except DvrkError as e:
+                        raise HoldError("not ready", f"episode {episode}: {e}") from None
+                    if not listener.wait(options.wait_s, after_s=after):
+                        raise HoldError("not ready", f"no task state after the reset in {options.wait_s:g} s")
+                # The arm must be ENABLED, homed, idle and valid before the first command of an episode.
+                reason = client.wait_ready(options.wait_s, after_s=after)
+                if reason:
+                    fault = _deadman_hold(reason)
+                    fault.data.update(episode=episode, seed=seed)
+                    raise fault
                 echo(f"episode {episode}: started (seed {seed})")
-                entry = _dvrk_episode(options, report, recorder, client, view, chain, policy, reset, episode, seed)
+                entry = _dvrk_episode(
+                    options, report, recorder, client, view, chain, checked, reset, episode, seed, stopper
+                )
                 report.episodes.append(entry)
                 recorder.write("/deploy/event", {"kind": "episode_end", **entry})
                 echo(
                     f"episode {episode}: success={entry['success']} steps {entry['steps']} "
                     f"peak force {entry['peak_force_n']:.3f} N"
                 )
-                if report.fault:
-                    break
         finally:
             listener.close()
             client.close()
@@ -320,12 +496,13 @@ def _dvrk_episode(
     client: Any,
     view: Any,
     chain: Any,
-    policy: Any,
+    policy: Callable[[Any], np.ndarray],
     reset: Any,
     episode: int,
     seed: int,
+    stopper: _Stopper,
 ) -> dict[str, Any]:
-
+    """One episode; a fault raises :class:`HoldError` after the tick that saw it was recorded."""
     cfg = view.config
     steps_total = sim.envs.MAX_EPISODE_STEPS
     ticks_per_step = max(1, round(cfg.physics.step_s / chain.control_period_s))
@@ -340,13 +517,16 @@ def _dvrk_episode(
     peak = 0.0
     steps = 0
     next_tick = time.monotonic()
-    fault_reported = False
     step_end = time.monotonic()
     for step in range(steps_total):
         if step:  # the task state the arm's last commands produced, not an older one (up to one period late)
             view.listener.wait(4 * chain.control_period_s, after_s=step_end)
         observation = view.observation()
-        action = np.clip(np.asarray(policy(observation), dtype=float).reshape(-1), -1.0, 1.0)
+        try:
+            action = np.clip(policy(observation), -1.0, 1.0)
+        except HoldError as e:
+            e.data.update(episode=episode, step=step, observation=observation)
+            raise
         recorder.write(
             "/deploy/action", {"episode": episode, "step": step, "action": action, "observation": observation}
         )
@@ -355,31 +535,28 @@ def _dvrk_episode(
         delta = CartesianDelta(step_rcm, float(action[3]) * cfg.max_yaw_rad, jaw, "local")
         chain.set_target(delta, client.measure())
         for _ in range(ticks_per_step):
-            measured = client.measure()
-            output = chain.tick(measured)
-            force = float(np.linalg.norm(measured.force_n))
-            peak = max(peak, force)
-            report.peak_force_n = max(report.peak_force_n, force)
-            predicted = None
-            if options.dry_run:
-                predicted = _predicted_force(view, measured, output.command, stiffness)
-                report.predicted_peak_force_n = max(report.predicted_peak_force_n, predicted)
-            else:
-                client.servo_jp(output.command)
-            status = client.status
-            sent = not options.dry_run and not status.holding
-            recorder.write("/deploy/measured", _measured_payload(measured))
-            recorder.write("/deploy/command", _command_payload(output, sent, predicted))
-            _account(report, recorder, output)
-            report.commands_sent += int(sent)
-            if status.holding and not options.dry_run:
-                report.fault = status.reason
-                recorder.write("/deploy/event", {"kind": "hold", "text": status.reason})
-                fault_reported = True
-                break
-            if options.dry_run and not status.ok and not fault_reported:
-                fault_reported = True
-                recorder.write("/deploy/event", {"kind": "deadman", "text": status.reason})
+            with stopper.tick():
+                measured = client.measure()
+                output = chain.tick(measured)
+                force = float(np.linalg.norm(measured.force_n))
+                peak = max(peak, force)
+                report.peak_force_n = max(report.peak_force_n, force)
+                predicted = None
+                if options.dry_run:
+                    predicted = _predicted_force(view, measured, output.command, stiffness)
+                    report.predicted_peak_force_n = max(report.predicted_peak_force_n, predicted)
+                else:
+                    client.servo_jp(output.command)
+                status = client.status
+                sent = not options.dry_run and not status.holding
+                recorder.write("/deploy/measured", _measured_payload(measured))
+                recorder.write("/deploy/command", _command_payload(output, sent, predicted))
+                _account(report, recorder, output)
+                report.commands_sent += int(sent)
+            if not status.ok:  # the dry run holds as the deploy would: it rehearses the real thing
+                fault = _deadman_hold(status.reason)
+                fault.data.update(episode=episode, step=step, measured=_measured_payload(measured))
+                raise fault
             next_tick += chain.control_period_s
             delay = next_tick - time.monotonic()
             if delay > 0:
@@ -388,13 +565,11 @@ def _dvrk_episode(
                 next_tick = time.monotonic()  # behind: tick again at once, do not burst to catch up
         steps += 1
         step_end = time.monotonic()
-        if report.fault:
-            break
     entry: dict[str, Any] = {"episode": episode, "seed": seed, "steps": steps, "peak_force_n": peak}
     try:
         success, distance = view.success()
-        entry.update(success=bool(success) and not report.fault, goal_distance_m=distance)
-    except Exception as e:  # no task state after a fault: not a success, say why
+        entry.update(success=bool(success), goal_distance_m=distance)
+    except Exception as e:  # no task state: not a success, say why
         entry.update(success=False, note=str(e))
     if options.dry_run:
         entry["deadman"] = client.status.reason

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from psm_control.errors import TissueRetractError
 
-__all__ = ["DvrkError", "DvrkTimeoutError", "RosNotAvailableError"]
+__all__ = ["DvrkError", "DvrkTimeoutError", "HoldError", "RosNotAvailableError"]
 
 
 class DvrkError(TissueRetractError):
@@ -30,3 +30,20 @@ class DvrkTimeoutError(DvrkError, TimeoutError):
 
 class RosNotAvailableError(TissueRetractError):
     """rclpy or the crtk_msgs interfaces are not installed (``pip install -e .[ros]``, then ``make install``)."""
+
+
+class HoldError(TissueRetractError):
+    """A fault during a deploy: the arm is held (nothing new is commanded) and the deploy stops (exit 4).
+
+    Attributes:
+        kind: What failed, e.g. ``"policy error"``, ``"invalid action"``, ``"policy overrun"``,
+            ``"not ready"``, ``"invalid data"``, ``"fault"``.
+        detail: What was wrong and what is allowed.
+        data: The offending values (JSON-ready), recorded with the hold.
+    """
+
+    def __init__(self, kind: str, detail: str, data: dict[str, object] | None = None) -> None:
+        self.kind = kind
+        self.detail = detail
+        self.data = dict(data or {})
+        super().__init__(f"{kind}: {detail}")

@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 from crtk_msgs.msg import OperatingState, StringStamped  # type: ignore[import-untyped]
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -28,6 +29,8 @@ from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
 from psm_control.commands import JointCommand, MeasuredState
+from psm_control.errors import TissueRetractError
+from safety.config import SafetyConfig
 
 __all__ = ["PsmClient"]
 
@@ -46,13 +49,15 @@ class PsmClient(Node):
 
     Args:
         arm: Arm name / namespace (``PSM1``, ``PSM2``, ...).
-        deadman_timeout_s: Largest age of ``measured_js`` before holding [s].
+        deadman_timeout_s: Largest age of ``measured_js`` before holding [s]; None: the chain's
+            :attr:`SafetyConfig.deadman_timeout_s <safety.config.SafetyConfig.deadman_timeout_s>` default.
         on_fault: Called (from the ROS thread) with the status when a hold starts.
         on_measured: Called (from the ROS thread) with each ``measured_js`` and its arrival time on
             ``time.perf_counter`` [s], e.g. to record or time the stream.
         node_name: ROS node name; default ``<arm>_client``.
         listen_only: Create no command publishers at all (a dry run): the client only subscribes, and
             every command method raises :class:`~hardware_if.errors.DvrkError`.
+        context: The rclpy context (default: the global one), e.g. one per ROS domain.
 
     Use as a context manager (or call :meth:`start` and :meth:`close`).
     """
@@ -61,16 +66,19 @@ class PsmClient(Node):
         self,
         arm: str = DEFAULT_ARM,
         *,
-        deadman_timeout_s: float = 0.1,
+        deadman_timeout_s: float | None = None,
         on_fault: Callable[[DeadmanStatus], None] | None = None,
         on_measured: Callable[[JointState, float], None] | None = None,
         node_name: str | None = None,
         listen_only: bool = False,
+        context: Context | None = None,
     ) -> None:
         self.topics = ArmTopics(arm)
-        super().__init__(node_name or f"{arm.lower()}_client")
+        super().__init__(node_name or f"{arm.lower()}_client", context=context)
         self._lock = threading.Condition()
-        self._deadman = Deadman(timeout_s=deadman_timeout_s)
+        timeout_s = SafetyConfig().deadman_timeout_s if deadman_timeout_s is None else deadman_timeout_s
+        self._deadman = Deadman(timeout_s=timeout_s)
+        self._data_fault = ""
         self._on_fault = on_fault
         self._on_measured = on_measured
         self._measured: JointState | None = None
@@ -154,37 +162,76 @@ class PsmClient(Node):
         self.close()
 
     # -- callbacks (ROS thread) -------------------------------------------------------------------
+    def _invalid(self, topic: str, what: str) -> None:
+        """Latch the first malformed or non-finite message (lock held): the deadman holds on it."""
+        if not self._data_fault:
+            self._data_fault = f"invalid data: {topic}: {what}"
+            self.get_logger().error(f"{self.topics.arm}: {self._data_fault}")
+            self._lock.notify_all()
+
+    def _joints(self, message: JointState, topic: str, names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray | None:
+        """Positions (and velocities, efforts) checked: the right joints, finite; None after latching a fault."""
+        try:
+            q = convert.joint_state_positions(message, names)
+            convert.joint_state_velocities(message, names)
+        except (TissueRetractError, ValueError) as e:
+            with self._lock:
+                self._invalid(topic, str(e))
+            return None
+        bad = [names[i] for i in np.flatnonzero(~np.isfinite(q))]
+        if not bad and not np.all(np.isfinite(np.asarray(message.velocity, dtype=float))):
+            bad = ["velocity"]
+        if not bad and not np.all(np.isfinite(np.asarray(message.effort, dtype=float))):
+            bad = ["effort"]
+        if bad:
+            with self._lock:
+                self._invalid(topic, f"non-finite {', '.join(bad)} (finite numbers only)")
+            return None
+        return q
+
     def _on_measured_js(self, message: JointState) -> None:
         if self._on_measured is not None:
             self._on_measured(message, time.perf_counter())
+        if self._joints(message, "measured_js") is None:
+            return  # never used: the deadman holds on the latched fault
         with self._lock:
             self._measured = message
             self._measured_rx_s = time.monotonic()
             self._lock.notify_all()
 
     def _on_setpoint_js(self, message: JointState) -> None:
-        try:
-            q = convert.joint_state_positions(message)
-        except ValueError as e:
-            self.get_logger().warning(f"ignoring setpoint_js: {e}")
+        q = self._joints(message, "setpoint_js")
+        if q is None:
             return
         with self._lock:
             self._setpoint_q = q
 
     def _on_jaw(self, message: JointState) -> None:
-        if len(message.position) == 1:
-            with self._lock:
-                self._jaw = float(message.position[0])
+        q = self._joints(message, "jaw/measured_js", (JAW_JOINT_NAME,))
+        if q is None:
+            return
+        with self._lock:
+            self._jaw = float(q[0])
 
     def _on_wrench(self, message: WrenchStamped) -> None:
+        force = convert.wrench_force(message)
+        t = message.wrench.torque
         with self._lock:
-            self._force_body_n = convert.wrench_force(message)
+            if not (np.all(np.isfinite(force)) and np.all(np.isfinite([t.x, t.y, t.z]))):
+                self._invalid("body/measured_cf", "non-finite force or torque (finite numbers only)")
+                return
+            self._force_body_n = force
 
     def _pose_callback(self, name: str) -> Callable[[PoseStamped], None]:
         def callback(message: PoseStamped) -> None:
+            p = message.pose.position
             try:
+                if not np.all(np.isfinite([p.x, p.y, p.z])):
+                    raise ValueError("non-finite position (finite numbers only)")
                 pose = convert.pose_matrix(message)
-            except ValueError:
+            except (TissueRetractError, ValueError) as e:
+                with self._lock:
+                    self._invalid(name, str(e))
                 return
             with self._lock:
                 self._poses[name] = pose
@@ -232,6 +279,7 @@ class PsmClient(Node):
             is_homed=bool(self._state.is_homed),
             measured_q=measured_q,
             setpoint_q=self._setpoint_q,
+            data_fault=self._data_fault,
         )
 
     def _apply_deadman(self) -> DeadmanStatus:
@@ -268,6 +316,7 @@ class PsmClient(Node):
     def resume(self) -> DeadmanStatus:
         """Clear a hold if the arm is fresh, present, ENABLED, homed and tracking; return the status."""
         with self._lock:
+            self._data_fault = ""
             status = self._deadman.release(self._facts())
             if not status.holding:
                 self._hold_q = None
@@ -377,6 +426,32 @@ class PsmClient(Node):
                 self._lock.wait(remaining)
         return self.measure()
 
+    def wait_ready(self, timeout_s: float, *, after_s: float = float("-inf")) -> str:
+        """Wait until the arm is fresh, present, ENABLED, homed, idle and tracking, with valid data.
+
+        Args:
+            timeout_s: How long to wait [s].
+            after_s: Judge only a ``measured_js`` that arrived after this ``time.monotonic`` [s].
+
+        Returns:
+            "" when ready; otherwise the reason it was not within ``timeout_s`` (at once for invalid data,
+            which does not clear by waiting).
+        """
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            while True:
+                reason = self._deadman.check(self._facts())
+                if not reason and (self._measured_rx_s or float("-inf")) <= after_s:
+                    reason = "no measurement: no measured_js since the episode's reset"
+                if not reason and self._state.is_busy:
+                    reason = "not ready: operating state busy (a move or homing is running)"
+                if not reason or self._data_fault:
+                    return reason
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return f"{reason} (waited {timeout_s:.3g} s)"
+                self._lock.wait(min(remaining, WATCHDOG_PERIOD_S))
+
     def enable(self, timeout_s: float = 5.0) -> None:
         """Send ``enable`` and wait for the state ENABLED."""
         self._request("enable", lambda s: s.state == "ENABLED", timeout_s)
@@ -402,6 +477,9 @@ class PsmClient(Node):
     def _request(self, command: str, done: Callable[[OperatingState], bool], timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
         with self._lock:
+            # A state change (enable, home) is not a servo stream: the deadman watches again from the next
+            # servo command on, instead of holding an arm that is homing on request.
+            self._commanding = False
             # Only a state published after the command counts: an arm already homed re-homes first.
             seen = self._state_count
             while True:

@@ -15,6 +15,11 @@ Channels (:data:`CHANNELS`):
 - ``/deploy/action``: every policy step, ``episode``, ``step``, the 5-D ``action`` and the observation.
 - ``/deploy/event``: episode start/end, safety stops, deadman holds, faults, Ctrl-C (``kind``, ``text``).
 - ``/deploy/report``: once at the end, the run's summary.
+
+A recording survives a crash: the writer ends its chunk and flushes the file at least every
+:data:`FLUSH_PERIOD_S` of wall time (and at every episode end and hold), so a SIGKILL loses at most about
+the last second. :func:`read_recording` reads such a file, which lacks its summary and footer, with a
+stream reader, and says so (:class:`RecordingRead`).
 """
 
 from __future__ import annotations
@@ -23,14 +28,25 @@ import json
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from struct import error as struct_error
 from types import TracebackType
 from typing import Any
 
 import numpy as np
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
+from mcap.records import Channel, Footer, Message
+from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
-__all__ = ["CHANNELS", "Recorder", "read_recording"]
+__all__ = ["CHANNELS", "CHUNK_SIZE_BYTES", "FLUSH_PERIOD_S", "Recorder", "RecordingRead", "read_recording"]
+
+#: A chunk is ended and the file flushed at least this often [s]: a crash loses at most this much.
+FLUSH_PERIOD_S = 1.0
+#: A chunk is also ended when it holds this many bytes (about 1 s of a 100 Hz deploy).
+CHUNK_SIZE_BYTES = 256 * 1024
+#: Events after which the file is flushed at once (what a post-mortem needs most).
+_FLUSH_EVENTS = ("episode_end", "hold", "interrupted", "fault")
 
 #: Channel topics and what each carries.
 CHANNELS = {
@@ -68,8 +84,9 @@ class Recorder:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = self.path.open("wb")
-        self._writer = Writer(self._file)
+        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE_BYTES)
         self._writer.start(profile="", library="tissue-retract")
+        self._flushed_s = time.monotonic()
         self._channels: dict[str, int] = {}
         self._sequence = 0
         self.counts: dict[str, int] = dict.fromkeys(CHANNELS, 0)
@@ -92,6 +109,16 @@ class Recorder:
         )
         self._sequence += 1
         self.counts[topic] += 1
+        if time.monotonic() - self._flushed_s >= FLUSH_PERIOD_S or (
+            topic == "/deploy/event" and payload.get("kind") in _FLUSH_EVENTS
+        ):
+            self.flush()
+
+    def flush(self) -> None:
+        """End the chunk in progress and write it to the file (what a crash after this keeps)."""
+        if not self._closed:
+            self._writer.flush()
+            self._flushed_s = time.monotonic()
 
     def close(self) -> None:
         """Finish the MCAP (summary and index) and close the file (safe to call twice)."""
@@ -109,9 +136,46 @@ class Recorder:
         self.close()
 
 
-def read_recording(path: str | Path) -> Iterator[tuple[str, float, dict[str, Any]]]:
-    """Yield ``(topic, log_time_s, payload)`` of every message of a recording, in log-time order."""
-    with Path(path).open("rb") as f:
-        reader = make_reader(f)
-        for _, channel, message in reader.iter_messages(log_time_order=True):
-            yield channel.topic, message.log_time * 1e-9, json.loads(message.data)
+class RecordingRead:
+    """The messages of a recording, read once: iterate for ``(topic, log_time_s, payload)`` in log-time order.
+
+    Attributes:
+        truncated: True when the file has no footer (the writer did not finish: a crash or a kill);
+            the messages are then those of every complete chunk, read with a stream reader.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.truncated = False
+        self.messages: list[tuple[str, float, dict[str, Any]]] = []
+        with Path(path).open("rb") as f:
+            try:
+                reader = make_reader(f)
+                for _, channel, message in reader.iter_messages(log_time_order=True):
+                    self.messages.append((channel.topic, message.log_time * 1e-9, json.loads(message.data)))
+                return
+            except (McapError, EOFError, ValueError, struct_error):
+                self.messages.clear()
+            self.truncated = True
+            f.seek(0)
+            channels: dict[int, str] = {}
+            rows: list[tuple[int, str, dict[str, Any]]] = []
+            try:
+                for record in StreamReader(f, skip_magic=False).records:
+                    if isinstance(record, Channel):
+                        channels[record.id] = record.topic
+                    elif isinstance(record, Message) and record.channel_id in channels:
+                        rows.append((record.log_time, channels[record.channel_id], json.loads(record.data)))
+                    elif isinstance(record, Footer):
+                        self.truncated = False
+            except (McapError, EOFError, ValueError, struct_error):
+                pass  # the torn record at the end: everything before it is kept
+            rows.sort(key=lambda row: row[0])
+            self.messages = [(topic, t * 1e-9, payload) for t, topic, payload in rows]
+
+    def __iter__(self) -> Iterator[tuple[str, float, dict[str, Any]]]:
+        return iter(self.messages)
+
+
+def read_recording(path: str | Path) -> RecordingRead:
+    """Every message of a recording, ``(topic, log_time_s, payload)`` in log-time order; see :class:`RecordingRead`."""
+    return RecordingRead(path)

@@ -52,6 +52,9 @@ class TaskListener(Node):
         for name in ("site", "goal", "achieved_goal"):
             self.create_subscription(PointStamped, task_topic(arm, name), self._point_callback(name), qos)
         self.create_subscription(Bool, task_topic(arm, "grasped"), self._on_grasped, qos)
+        self._resets: int | None = None
+        self._resets_rx_s = float("-inf")
+        self.create_subscription(Int64, task_topic(arm, "resets"), self._on_resets, qos)
         self._reset = None if listen_only else self.create_publisher(Int64, task_topic(arm, "reset"), qos)
         self._executor = SingleThreadedExecutor(context=self.context)
         self._executor.add_node(self)
@@ -75,6 +78,13 @@ class TaskListener(Node):
                 self._lock.notify_all()
 
         return callback
+
+    def _on_resets(self, message: Int64) -> None:
+        with self._lock:
+            if self._resets != int(message.data):
+                self._resets_rx_s = time.monotonic()
+            self._resets = int(message.data)
+            self._lock.notify_all()
 
     def _on_grasped(self, message: Bool) -> None:
         with self._lock:
@@ -103,6 +113,36 @@ class TaskListener(Node):
                     return False
                 self._lock.wait(min(remaining, 0.1))
             return True
+
+    def serves_resets(self) -> bool:
+        """True when the task's publisher counts its resets (the simulated dVRK), checked in the ROS graph."""
+        return self.count_publishers(task_topic(self.arm, "resets")) > 0
+
+    def reset_and_wait(self, seed: int, timeout_s: float) -> float:
+        """Ask for a new episode and wait until the scene reports it done; return when that was seen.
+
+        Returns:
+            The ``time.monotonic`` [s] at which the new reset count arrived: task and arm states that
+            arrive after it are of the new scene.
+
+        Raises:
+            DvrkTimeoutError: No reset subscriber, no count, or the count did not change in ``timeout_s``.
+        """
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            while self._resets is None or self._reset is None or self._reset.get_subscription_count() == 0:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0 or self._reset is None:
+                    raise DvrkTimeoutError(f"{task_topic(self.arm, 'reset')} and its count", timeout_s)
+                self._lock.wait(min(remaining, 0.02))
+            before = self._resets
+            self._reset.publish(Int64(data=int(seed)))
+            while self._resets == before:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    raise DvrkTimeoutError(f"a reset of the task scene (seed {seed})", timeout_s)
+                self._lock.wait(min(remaining, 0.1))
+            return self._resets_rx_s
 
     def request_reset(self, seed: int) -> bool:
         """Ask the simulated dVRK for a new episode; False for a listen-only listener."""

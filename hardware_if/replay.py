@@ -36,6 +36,8 @@ class Recording:
     safety_stop: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     predicted_force_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
     actions: int = 0
+    #: The file lacked its footer (the run was killed): this is what its complete chunks kept.
+    truncated: bool = False
 
 
 @dataclass
@@ -52,16 +54,24 @@ class RecordingSummary:
     episodes: list[dict[str, Any]]
     dry_run: bool
     target: str
+    truncated: bool = False
+    invalid_actions: int = 0
 
     def lines(self) -> list[str]:
         """The printed summary."""
         kind = "dry run" if self.dry_run else "deploy"
-        out = [
+        out = (
+            ["truncated recording (no footer: the run did not finish); summarising what it kept"]
+            if self.truncated
+            else []
+        )
+        out += [
             f"{kind} to {self.target or '?'}: {self.duration_s:.2f} s, {len(self.episodes)} episode(s)",
             f"commands: {self.commands} computed, {self.commands_sent} sent",
             f"safety stop ticks: {self.safety_stop_ticks}; holds: {len(self.holds)}"
             + "".join(f"\n  hold: {h}" for h in self.holds),
             f"peak force: {self.peak_force_n:.3f} N",
+            f"invalid actions: {self.invalid_actions}",
             ("command-to-arm distance max (dry run: nothing was sent) " if self.dry_run else "tracking error max ")
             + "|command(t-1) - measured(t)|: "
             + ", ".join(f"{n} {v:.4g}" for n, v in zip(JOINT_NAMES, self.tracking_error_max, strict=True)),
@@ -85,7 +95,9 @@ def load_recording(path: str | Path) -> Recording:
     rec = Recording()
     rows: dict[str, list[Any]] = collections.defaultdict(list)
     try:
-        messages = list(read_recording(path))
+        read = read_recording(path)
+        messages = read.messages
+        rec.truncated = read.truncated
     except Exception as e:
         raise ConfigurationError("recording", str(path), "an MCAP file written by tissue-retract deploy") from e
     if not messages:
@@ -135,6 +147,7 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
     else:
         tracking = np.full(len(JOINT_NAMES), np.nan)
     holds = [str(e.get("text", "")) for e in rec.events if e.get("kind") in ("hold", "deadman", "interrupted")]
+    invalid = sum(e.get("kind") == "invalid_action" for e in rec.events)
     episodes = [e for e in rec.events if e.get("kind") == "episode_end"]
     return RecordingSummary(
         duration_s=duration,
@@ -147,6 +160,8 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
         episodes=episodes,
         dry_run=bool(rec.meta.get("dry_run", False)),
         target=str(rec.meta.get("target", "")),
+        truncated=rec.truncated,
+        invalid_actions=int(invalid),
     )
 
 

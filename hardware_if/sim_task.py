@@ -36,6 +36,7 @@ TASK_TOPICS = {
     "achieved_goal": "geometry_msgs/PointStamped: the task's achieved goal, in <arm>_base [m]",
     "grasped": "std_msgs/Bool: the jaw holds the flap",
     "reset": "std_msgs/Int64 (subscribed): rebuild the scene with this seed (a new episode)",
+    "resets": "std_msgs/Int64: how many resets the scene has done (a client knows its reset took effect)",
 }
 
 
@@ -192,12 +193,16 @@ class TaskTopics:
             for name in ("site", "goal", "achieved_goal")
         }
         self._grasped = node.create_publisher(Bool, task_topic(arm, "grasped"), qos)
+        self._int = Int64
+        self._resets = 0
+        self._resets_pub = node.create_publisher(Int64, task_topic(arm, "resets"), qos)
         node.create_subscription(Int64, task_topic(arm, "reset"), self._on_reset, qos)
         node.create_timer(node.period_s, self._publish)
 
     def _on_reset(self, message: Any) -> None:
         self.arm_model.reset_scene(int(message.data))
         self.node.set_base_frame(self.arm_model.base_frame)
+        self._resets += 1
         self.node.get_logger().info(f"task scene reset (seed {int(message.data)})")
 
     def _publish(self) -> None:
@@ -212,6 +217,8 @@ class TaskTopics:
             message.point.x, message.point.y, message.point.z = (float(v) for v in state[name][:3])
             publisher.publish(message)
         self._grasped.publish(self._bool(data=state["grasped"]))
+        # Last, after the state of the same period: a client that sees the count sees the new scene next.
+        self._resets_pub.publish(self._int(data=self._resets))
 
 
 def task_arm_model(task: str, seed: int = 0) -> TaskArm:

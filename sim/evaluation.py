@@ -1,8 +1,8 @@
 """Running episodes of a policy and summarising them: success, forces, events, failure classes.
 
 The failure classes replace the paper's by-hand classification: an unsuccessful episode is labelled by
-the most serious event it saw (``sim_unstable`` > ``safety_stop`` > ``tissue_damage`` > ``grip_loss``
-> ``improper_grasp``), and ``timeout`` when none occurred. Success is scored at the final step, as in
+the most serious event it saw (``sim_unstable`` > ``safety_stop`` > ``invalid_action`` > ``tissue_damage``
+> ``grip_loss`` > ``improper_grasp``), and ``timeout`` when none occurred. Success is scored at the final step, as in
 the paper's evaluation.
 
 The safety figures come from what the joints really did, step by step: ``joint_limit_violations``
@@ -25,8 +25,10 @@ from psm_control.errors import ConfigurationError
 
 __all__ = ["FAILURE_CLASSES", "EpisodeResult", "Policy", "run_episode", "summarize"]
 
-FAILURE_CLASSES = ("none", "improper_grasp", "grip_loss", "tissue_damage", "safety_stop", "timeout", "sim_unstable")
-_SEVERITY = ("sim_unstable", "safety_stop", "tissue_damage", "grip_loss", "improper_grasp")
+FAILURE_CLASSES = (
+    "none", "improper_grasp", "grip_loss", "tissue_damage", "safety_stop", "invalid_action", "timeout", "sim_unstable",
+)  # fmt: skip
+_SEVERITY = ("sim_unstable", "safety_stop", "invalid_action", "tissue_damage", "grip_loss", "improper_grasp")
 
 Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
 
@@ -50,6 +52,7 @@ class EpisodeResult:
     min_insertion_margin_m: float
     safety_stops: int
     interventions: int
+    invalid_actions: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -100,6 +103,7 @@ def run_episode(
         min_insertion_margin_m=margin,
         safety_stops=stops,
         interventions=interventions,
+        invalid_actions=counts["invalid_action"],
     )
 
 
@@ -125,6 +129,7 @@ def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, A
         "workspace_violation_mm": float(max(r.workspace_violation_mm for r in results)),
         "min_insertion_margin_m": float(min(r.min_insertion_margin_m for r in results)),
         "safety_stops": int(sum(r.safety_stops for r in results)),
+        "invalid_actions": int(sum(r.invalid_actions for r in results)),
         "interventions": int(sum(r.interventions for r in results)),
     }
 

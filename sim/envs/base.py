@@ -175,6 +175,8 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             if given is not None
             else self._sample_goal(self.np_random, self.site_position())
         )
+        # The jaw an invalid action keeps: the jaw command last given (the pending zeros open it).
+        self._last_jaw_action = 0.0
         latency = int(self.values["action_latency_steps"])
         self._pending: collections.deque[np.ndarray] = collections.deque([np.zeros(5)] * latency)
         self._force = np.zeros(3)
@@ -300,9 +302,11 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         raw = np.asarray(action, dtype=float).reshape(-1)
         if raw.shape != (5,) or not np.all(np.isfinite(raw)):
             events["invalid_action"] = True
-            return np.zeros(5)  # hold still with the jaw open; never reaches the physics
+            # Hold position and keep the jaw as it is: opening it would drop the tissue.
+            return np.array([0.0, 0.0, 0.0, 0.0, self._last_jaw_action])
         clipped = np.clip(raw, -1.0, 1.0)
         events["action_clipped"] = bool(np.any(clipped != raw))
+        self._last_jaw_action = float(clipped[4])
         return clipped
 
     def _measured(self) -> MeasuredState:

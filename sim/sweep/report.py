@@ -42,6 +42,7 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "p95": float(np.percentile(forces, 95)) if forces else None,
         },
         "safety_stops": sum(int(r.get("safety_stops") or 0) for r in finished),
+        "invalid_actions": sum(int(r.get("invalid_actions") or 0) for r in finished),
         "interventions": dict(sorted(interventions.items())),
         "failure_classes": dict(sorted(Counter(str(r.get("failure_class", "none")) for r in finished).items())),
     }
@@ -189,6 +190,7 @@ def write_report(
             f"{quantity(summary['peak_force_n']['p50'], 'N')} / {quantity(summary['peak_force_n']['p95'], 'N')}",
         ),
         ("safety stops", f"{summary['safety_stops']} ticks"),
+        ("invalid actions", f"{summary['invalid_actions']} (held; the jaw kept)"),
         ("interventions", _counts(summary["interventions"])),
         ("failure classes", _counts(summary["failure_classes"])),
         ("package", f"tissue-retract {__version__}"),

@@ -3,6 +3,11 @@
 The deploy runs the scripted expert through the control chain with the PsmClient backend; the tests
 check a whole Task I episode, a dry run that publishes nothing on motion topics, the recording and its
 replay, and a hold (not a crash) when the simulated console dies mid-episode.
+
+The deadman and the policy budget are wall-clock checks (0.05 s each by default); these tests run on a
+shared, loaded machine, so their deploys use a 0.5 s deadman and a 600 s policy budget, and act on what
+the deploy prints (its fault policy's line), never after a sleep. The default-timeout faults are
+``tests/ros/test_faults.py``'s.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from hardware_if.crtk import MOTION_TOPICS, ArmTopics, periodic_qos
 from hardware_if.deploy import EXIT_HOLD
 from hardware_if.psm_client import PsmClient
 from hardware_if.replay import load_recording, summarize_recording
+from tissue_retract.faults import GATE_VARIABLE, MARK
 
 #: A seed whose Task I episode the scripted expert completes in the simulation.
 SEED = "2"
@@ -32,11 +38,29 @@ DEPLOY_TIMEOUT_S = 240.0
 EPISODES = 3
 
 
-def _deploy(env: dict[str, str], record: Path, *extra: str) -> subprocess.Popen[str]:
-    command = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", "scripted", "--target", "dvrk"]
+def _deploy(
+    env: dict[str, str], record: Path, *extra: str, policy: str = "scripted", gate: Path | None = None
+) -> subprocess.Popen[str]:
+    config = record.with_suffix(".toml")
+    config.write_text("deadman_timeout_s = 0.5\n")
+    command = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", policy, "--target", "dvrk"]
     command += ["--task", "lift", "--seed", SEED, "--domain-id", env["ROS_DOMAIN_ID"], "--record", str(record)]
-    command += ["--wait", "60", *extra]
-    return subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    command += ["--wait", "60", "--safety-config", str(config), "--policy-budget", "600", *extra]
+    child_env = dict(env, PYTHONUNBUFFERED="1")
+    if gate is not None:
+        child_env[GATE_VARIABLE] = str(gate)
+    return subprocess.Popen(command, env=child_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _read_until(process: subprocess.Popen[str], text: str) -> list[str]:
+    """The child's lines up to the first containing ``text`` (or to its end)."""
+    assert process.stdout is not None
+    lines: list[str] = []
+    for line in process.stdout:
+        lines.append(line)
+        if text in line:
+            break
+    return lines
 
 
 @pytest.fixture
@@ -136,21 +160,13 @@ def test_killing_sim_dvrk_mid_episode_holds_and_reports(
 ) -> None:
     """Killing sim-dvrk mid-episode makes deploy hold, say why, record it and exit with status 4."""
     record = tmp_path / "killed.mcap"
-    deploy = _deploy(ros_env, record)
-    assert deploy.stdout is not None
-    lines: list[str] = []
-    deadline = time.monotonic() + DEPLOY_TIMEOUT_S
-    while time.monotonic() < deadline:
-        line = deploy.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if "started" in line:
-            break
-    assert any("started" in line for line in lines), "".join(lines)
-    time.sleep(0.5)
+    gate = tmp_path / "go"
+    deploy = _deploy(ros_env, record, policy="tissue_retract.faults:Gate", gate=gate)
+    lines = _read_until(deploy, MARK)  # the policy waits at step 3, mid-episode, until the gate opens
+    assert any(MARK in line for line in lines), "".join(lines)
     sim.send_signal(signal.SIGKILL)
     sim.wait(timeout=30)
+    gate.touch()
     rest, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
     output = "".join(lines) + rest
     assert deploy.returncode == EXIT_HOLD, output
@@ -161,19 +177,20 @@ def test_killing_sim_dvrk_mid_episode_holds_and_reports(
 
 
 def test_ctrl_c_stops_deploy_cleanly(sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path) -> None:
-    """Ctrl-C mid-episode stops commanding between two ticks, reports, records it and exits 130."""
+    """Ctrl-C mid-episode stops commanding between two ticks, reports, records it and exits 130.
+
+    The signal is sent once the deploy has ticked: its policy prints a line at step 3 (after the ticks of
+    steps 0-2) and then never returns, so the episode cannot end before the signal, whatever the load.
+    """
     record = tmp_path / "interrupted.mcap"
-    deploy = _deploy(ros_env, record)
-    assert deploy.stdout is not None
-    lines: list[str] = []
-    for line in deploy.stdout:
-        lines.append(line)
-        if "started" in line:
-            break
-    time.sleep(0.5)
+    deploy = _deploy(ros_env, record, policy="tissue_retract.faults:Hang")
+    lines = _read_until(deploy, MARK)
+    assert any(MARK in line for line in lines), "".join(lines)
     deploy.send_signal(signal.SIGINT)
     rest, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
     output = "".join(lines) + rest
     assert deploy.returncode == 130, output
     assert "interrupted (Ctrl-C)" in output and "Traceback" not in output, output
-    assert "Ctrl-C" in summarize_recording(load_recording(record)).holds
+    summary = summarize_recording(load_recording(record))
+    assert "Ctrl-C" in summary.holds
+    assert summary.commands_sent > 0  # it had commanded the arm before the signal

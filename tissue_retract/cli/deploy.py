@@ -11,8 +11,13 @@ An arm that is not ENABLED and homed is enabled and homed first (not in a dry ru
 no command publisher: nothing is published on servo_jp, servo_cp, move_jp, move_cp, jaw/servo_jp or
 jaw/move_jp. It ends with a report: commands it would have sent, safety interventions, predicted forces.
 
-The deadman holds the arm on stale or vanished measurements, a state other than ENABLED and homed, or a
-tracking error; deploy then stops, says why and exits with status 4. Ctrl-C stops cleanly (status 130).
+Every fault ends in the same hold: the policy raising or returning anything but 5 finite numbers, a policy
+step slower than ``--policy-budget`` (default one policy period, 0.05 s), malformed or non-finite data on
+a subscribed topic, an arm not ENABLED, homed and idle when an episode starts (waited for up to
+``--wait``), a stale or vanished arm, a tracking error. Deploy then stops commanding (the arm keeps the
+last verified command), records the fault, prints ``HOLD: <reason>`` and exits with status 4.
+Ctrl-C (SIGINT), SIGTERM and SIGHUP stop between two control ticks and close the recording; the exit
+status is 128 + the signal: 130, 143, 129.
 Every run is recorded to MCAP (``--record``, default ``runs/deploy-<time>.mcap``; see ``replay``).
 
 Discovery stays on localhost (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) for dry runs and unless
@@ -51,7 +56,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
     parser.add_argument("--episodes", type=int, default=1, help="episodes (default: 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
-    parser.add_argument("--wait", type=float, default=30.0, help="seconds to wait for the arm and task topics")
+    parser.add_argument(
+        "--wait", type=float, default=30.0, help="seconds to wait for the arm (ENABLED, homed) and the task topics"
+    )
+    parser.add_argument(
+        "--policy-budget",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="longest a policy step may take before the arm is held (default: one policy period)",
+    )
     parser.add_argument(
         "--domain-id", type=int, default=environment_domain_id(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
     )
@@ -63,7 +77,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Deploy, print the report, return 0, 4 (hold) or 130 (Ctrl-C)."""
+    """Deploy, print the report, return 0, 4 (hold) or 128 + the stop signal (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP)."""
     if args.network and args.dry_run:
         raise ConfigurationError("--network", True, "not with --dry-run: dry runs stay on localhost")
     if args.target == "dvrk":
@@ -88,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
         episodes=args.episodes,
         seed=args.seed,
         wait_s=args.wait,
+        policy_budget_s=args.policy_budget,
     )
     report = deploy(options, echo=lambda line: print(line, flush=True))
     for line in report.lines():

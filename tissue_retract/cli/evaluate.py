@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     limit = f" (limit {force_limit_n:g} N{'' if summary['safety'] else ', NOT enforced'})"
     table.add_row("peak force [N]", f"{summary['peak_force_n']:.3f}{limit}")
     table.add_row("mean peak force [N]", f"{summary['mean_peak_force_n']:.3f}")
-    for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops", "interventions"):
+    for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops", "invalid_actions", "interventions"):
         table.add_row(key, str(summary[key]))
     table.add_row("joint limit violations", str(summary["joint_limit_violations"]))
     table.add_row("workspace violation [mm]", f"{summary['workspace_violation_mm']:.2f}")

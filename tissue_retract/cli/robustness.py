@@ -146,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
         "peak force max / p95 [N]",
         f"{summary['peak_force_n']['max'] or 0:.3f} / {summary['peak_force_n']['p95'] or 0:.3f}",
     )
+    table.add_row("safety stops / invalid actions", f"{summary['safety_stops']} / {summary['invalid_actions']}")
     table.add_row("failure classes", ", ".join(f"{k} {v}" for k, v in summary["failure_classes"].items()))
     if summary["episodes_per_s"]:
         table.add_row("episodes/s (this run)", f"{summary['episodes_per_s']:.2f}")

@@ -1,0 +1,49 @@
+"""The deploy's fault matrix against a real ``sim-dvrk`` over loopback DDS (no mock of ROS).
+
+Each fault of :data:`tissue_retract.faults.FAULTS` runs a real deploy child process (and a real sim-dvrk
+on a domain of its own, derived from this run's) and injects its fault when the deploy's policy prints
+that it reached the fault step: nothing is timed by sleeping. Every fault must end with its documented
+exit status (4 for a hold, 128 + signal for a stop signal), its reason on the ``HOLD:`` line, no
+traceback, and the hold in the recording; a SIGKILL in the third episode leaves a recording that
+``replay`` summarises with the two finished episodes.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hardware_if.network import run_domain_id
+from tissue_retract.faults import FAULTS, Fault, run_fault
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", FAULTS, ids=[f.name for f in FAULTS])
+def test_fault_ends_in_a_recorded_hold(fault: Fault, tmp_path: Path) -> None:
+    """The fault ends with its exit status and reason, no traceback, and the hold in the recording."""
+    domain = 1 + (run_domain_id() + FAULTS.index(fault)) % 100  # a domain of this server's own (not the run's)
+    result = run_fault(fault, tmp_path, domain)
+    assert result.status == fault.status, result.output
+    assert not result.traceback, result.output
+    assert fault.reason in result.hold, result.output
+    if fault.action == "kill-deploy":
+        assert result.truncated and result.episodes_kept == 2, result.recording
+        done = subprocess.run(
+            [sys.executable, "-m", "tissue_retract", "replay", str(tmp_path / "run.mcap")],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert done.returncode == 0, done.stderr
+        assert "truncated recording" in done.stdout and "2 episode(s)" in done.stdout, done.stdout
+        assert "episode 0: success=True" in done.stdout and "episode 1: success=True" in done.stdout
+    else:
+        assert result.holds_recorded and any(fault.reason in h for h in result.holds_recorded), result.recording
+        if fault.status == 4:
+            assert "HOLD:" in result.hold
+            if fault.action == "kill-console":
+                assert any(r in result.hold for r in ("stale", "publisher gone")), result.hold
+    assert result.ok

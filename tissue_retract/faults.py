@@ -1,0 +1,503 @@
+"""The deploy's fault matrix: faulty policies, fault injection over ROS 2, and a runner for each fault.
+
+Each :class:`Fault` runs a real ``tissue-retract deploy`` (and, for the dVRK target, a real
+``tissue-retract sim-dvrk`` on a loopback-only ROS domain of its own) as child processes and injects one
+fault: a policy that raises, exits, returns garbage or overruns; a non-finite message on a subscribed
+topic; a tracking error; an arm disabled mid-episode or never enabled; a console that dies; a stop signal;
+a SIGKILL of the deploy. :func:`run_fault` reports the exit status, the hold line and what the recording
+kept. ``tissue-retract bench faults`` runs them all; the tests run them one by one.
+
+Nothing here is timed by sleeping: the faulty policies (:class:`FaultPolicy`) act at a chosen episode
+and step and print a line there (``fault policy: episode E step S``), after that step's ticks; the
+runner acts when it reads that line, and a gated policy waits for the runner's go (a file) before
+returning, so an injection always lands mid-episode whatever the machine's load.
+
+The policies are set with environment variables: ``TISSUE_RETRACT_FAULT_AT`` (``"episode:step"``,
+default ``"0:3"``) and ``TISSUE_RETRACT_FAULT_GATE`` (the go file of :class:`Gate`).
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hardware_if.network import local_ros_env
+from hardware_if.replay import load_recording, summarize_recording
+from psm_control.errors import ConfigurationError
+from sim.expert import ScriptedExpert
+
+__all__ = [
+    "FAULTS",
+    "Exits",
+    "Fault",
+    "FaultPolicy",
+    "FaultResult",
+    "Gate",
+    "Hang",
+    "Raises",
+    "ReturnsNan",
+    "Slow",
+    "WrongShape",
+    "run_fault",
+]
+
+#: Environment variable: where the fault policies act, ``"episode:step"``.
+AT_VARIABLE = "TISSUE_RETRACT_FAULT_AT"
+#: Environment variable: the file whose creation lets a :class:`Gate` policy go on.
+GATE_VARIABLE = "TISSUE_RETRACT_FAULT_GATE"
+#: The line a fault policy prints when it acts.
+MARK = "fault policy: episode"
+#: Longest a gated or hanging policy waits before giving up (a guard; the runner acts long before) [s].
+GUARD_S = 600.0
+
+
+class FaultPolicy:
+    """The scripted expert, with a fault at one step (``TISSUE_RETRACT_FAULT_AT``, default ``0:3``)."""
+
+    def __init__(self, env: Any) -> None:
+        self._expert = ScriptedExpert(env)
+        at = os.environ.get(AT_VARIABLE, "0:3")
+        try:
+            episode, step = (int(v) for v in at.split(":"))
+        except ValueError:
+            raise ConfigurationError(AT_VARIABLE, at, "'episode:step', two integers") from None
+        self._at = (episode, step)
+        self._episode = -1
+        self._step = 0
+
+    def reset(self) -> None:
+        self._expert.reset()
+        self._episode += 1
+        self._step = 0
+
+    def __call__(self, observation: dict[str, np.ndarray]) -> Any:
+        action = self._expert(observation)
+        here = (self._episode, self._step)
+        self._step += 1
+        if here != self._at:
+            return action
+        print(f"{MARK} {here[0]} step {here[1]}", flush=True)
+        return self.fault(action)
+
+    def fault(self, action: np.ndarray) -> Any:
+        """What the policy does at the fault step (the expert's action here)."""
+        return action
+
+
+class Raises(FaultPolicy):
+    """Raises RuntimeError."""
+
+    def fault(self, action: np.ndarray) -> Any:
+        raise RuntimeError("injected policy failure")
+
+
+class Exits(FaultPolicy):
+    """Raises SystemExit(0), as a stray ``sys.exit()`` in a policy would."""
+
+    def fault(self, action: np.ndarray) -> Any:
+        raise SystemExit(0)
+
+
+class ReturnsNan(FaultPolicy):
+    """Returns five NaN."""
+
+    def fault(self, action: np.ndarray) -> Any:
+        return np.full(5, np.nan)
+
+
+class WrongShape(FaultPolicy):
+    """Returns three numbers instead of five."""
+
+    def fault(self, action: np.ndarray) -> Any:
+        return np.zeros(3)
+
+
+class Slow(FaultPolicy):
+    """Takes 2 s for one step (the policy's own delay is the fault)."""
+
+    def fault(self, action: np.ndarray) -> Any:
+        time.sleep(2.0)
+        return action
+
+
+class Hang(FaultPolicy):
+    """Never returns (until a signal ends the deploy): a deploy caught mid-episode for a signal."""
+
+    def fault(self, action: np.ndarray) -> Any:
+        time.sleep(GUARD_S)
+        return action
+
+
+class Gate(FaultPolicy):
+    """Waits at the fault step until the file ``TISSUE_RETRACT_FAULT_GATE`` exists, then goes on."""
+
+    def fault(self, action: np.ndarray) -> Any:
+        gate = Path(os.environ[GATE_VARIABLE])
+        deadline = time.monotonic() + GUARD_S
+        while not gate.exists() and time.monotonic() < deadline:
+            time.sleep(0.005)  # polling the runner's go, not timing anything
+        return action
+
+
+# -- the matrix ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Fault:
+    """One fault of the matrix.
+
+    Attributes:
+        name: Short name (the table's first column).
+        target: ``dvrk`` (against a sim-dvrk child) or ``sim``.
+        policy: The faulty policy (a class of this module).
+        action: What the runner does when the policy's line appears: ``""`` (the policy is the fault),
+            ``nan:<topic>``, ``early:<topic>`` (a NaN as the deploy starts), ``tracking``, ``disable``,
+            ``kill-console``, ``signal:<NAME>``, ``kill-deploy``.
+        status: Expected exit status.
+        reason: Text the hold (or interruption) reason must contain.
+        episodes: Episodes of the deploy.
+        at: Where the policy acts (``"episode:step"``).
+        extra: More deploy arguments.
+        default_deadman: Keep the default deadman timeout (only the stale fault); others use a 1 s deadman
+            so that a loaded machine's scheduling cannot trip it before the fault is injected.
+        default_budget: Keep the default policy budget (the overrun fault); others allow 600 s, the gate's.
+    """
+
+    name: str
+    target: str
+    policy: str
+    status: int
+    reason: str
+    action: str = ""
+    episodes: int = 1
+    at: str = "0:3"
+    extra: tuple[str, ...] = ()
+    default_deadman: bool = False
+    default_budget: bool = False
+
+
+@dataclass
+class FaultResult:
+    """What one fault did: exit status, hold line, recording, and whether it was as expected."""
+
+    fault: Fault
+    status: int
+    hold: str
+    traceback: bool
+    recording: str
+    output: str
+    episodes_kept: int = 0
+    holds_recorded: list[str] = field(default_factory=list)
+    truncated: bool = False
+
+    @property
+    def ok(self) -> bool:
+        """Expected status and reason, no traceback, and the hold (or interruption) in the recording."""
+        recorded = any(self.fault.reason in h for h in self.holds_recorded)
+        if self.fault.action == "kill-deploy":
+            recorded = self.truncated and self.episodes_kept == self.fault.episodes - 1
+        return self.status == self.fault.status and self.fault.reason in self.hold and not self.traceback and recorded
+
+
+_MODULE = __name__
+#: The fault matrix (``tissue-retract bench faults`` runs it; ``tests/ros/test_faults.py`` tests it).
+FAULTS: tuple[Fault, ...] = (
+    Fault("policy raises", "dvrk", "Raises", 4, "policy error: the policy raised RuntimeError"),
+    Fault("policy SystemExit(0)", "dvrk", "Exits", 4, "policy error: the policy raised SystemExit"),
+    Fault("policy returns NaN", "dvrk", "ReturnsNan", 4, "invalid action"),
+    Fault("policy wrong shape", "dvrk", "WrongShape", 4, "invalid action: shape (3,)"),
+    Fault("policy overrun (2 s)", "dvrk", "Slow", 4, "policy overrun", default_budget=True),
+    *(
+        Fault(f"NaN on {topic}", "dvrk", "Gate", 4, f"invalid data: {topic}", action=f"nan:{topic}")
+        for topic in (
+            "measured_js",
+            "setpoint_js",
+            "measured_cp",
+            "local/measured_cp",
+            "jaw/measured_js",
+            "body/measured_cf",
+        )
+    ),
+    Fault("NaN on measured_js at start-up", "dvrk", "Gate", 4, "invalid data: measured_js", action="early:measured_js"),
+    Fault("tracking error", "dvrk", "Gate", 4, "tracking error", action="tracking"),
+    Fault("arm disabled mid-episode", "dvrk", "Gate", 4, "not ready", action="disable"),
+    Fault(
+        "arm not ready at start (dry run)",
+        "dvrk",
+        "Gate",
+        4,
+        "not ready: operating state DISABLED",
+        extra=("--dry-run", "--wait", "5"),
+    ),
+    Fault("console killed (stale)", "dvrk", "Gate", 4, "", action="kill-console", default_deadman=True),
+    Fault("policy raises (dry run)", "dvrk", "Raises", 4, "policy error", extra=("--dry-run",)),
+    Fault("SIGINT mid-episode", "dvrk", "Hang", 130, "Ctrl-C", action="signal:SIGINT"),
+    Fault("SIGTERM mid-episode", "dvrk", "Hang", 143, "SIGTERM", action="signal:SIGTERM"),
+    Fault("SIGHUP mid-episode", "dvrk", "Hang", 129, "SIGHUP", action="signal:SIGHUP"),
+    Fault("policy raises (sim)", "sim", "Raises", 4, "policy error"),
+    Fault("policy returns NaN (sim)", "sim", "ReturnsNan", 4, "invalid action"),
+    Fault("SIGTERM mid-episode (sim)", "sim", "Hang", 143, "SIGTERM", action="signal:SIGTERM"),
+    Fault("SIGKILL in episode 3 (sim)", "sim", "Hang", -9, "", action="kill-deploy", episodes=3, at="2:3"),
+)
+#: Seed of the Task I episodes (one the scripted expert completes).
+SEED = 2
+
+
+def fault_named(name: str) -> Fault:
+    """The fault of :data:`FAULTS` called ``name``."""
+    for fault in FAULTS:
+        if fault.name == name:
+            return fault
+    raise ConfigurationError("fault", name, "one of " + ", ".join(repr(f.name) for f in FAULTS))
+
+
+class _Lines:
+    """A child's merged output, read on a thread: wait for a line without blocking on the pipe."""
+
+    def __init__(self, process: subprocess.Popen[str]) -> None:
+        self.lines: list[str] = []
+        self.ended = False
+        self._queue: queue.Queue[str | None] = queue.Queue()
+        self._thread = threading.Thread(target=self._read, args=(process,), daemon=True)
+        self._thread.start()
+
+    def _read(self, process: subprocess.Popen[str]) -> None:
+        for line in process.stdout or ():
+            self._queue.put(line)
+        self._queue.put(None)
+
+    def wait_for(self, text: str, timeout_s: float) -> bool:
+        """Collect lines until one contains ``text`` (True) or the output ends or the guard runs out."""
+        if any(text in line for line in self.lines):
+            return True
+        deadline = time.monotonic() + timeout_s
+        while (remaining := deadline - time.monotonic()) > 0:
+            try:
+                line = self._queue.get(timeout=remaining)
+            except queue.Empty:
+                return False
+            if line is None:
+                self.ended = True
+                self._queue.put(None)
+                return False
+            self.lines.append(line)
+            if text in line:
+                return True
+        return False
+
+    def rest(self, timeout_s: float) -> str:
+        """Everything up to the end of the output."""
+        self.wait_for("\0never\0", timeout_s)
+        self._thread.join(timeout=1.0)
+        return "".join(self.lines)
+
+
+def _child_env(domain_id: int) -> dict[str, str]:
+    env = local_ros_env(domain_id)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _start(command: list[str], env: dict[str, str]) -> subprocess.Popen[str]:
+    return subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _stop(process: subprocess.Popen[str], timeout_s: float = 30.0) -> None:
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+class _Injector:
+    """A ROS 2 node of its own context on the fault's domain: publishes the injected messages."""
+
+    def __init__(self, domain_id: int, arm: str = "PSM1") -> None:
+        import rclpy  # the ros extra
+        from rclpy.context import Context
+
+        self._rclpy = rclpy
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node(f"fault_injector_{os.getpid()}", context=self.context)
+        self.arm = arm
+
+    def publisher(self, topic: str) -> tuple[Any, Any]:
+        """A publisher on ``/<arm>/<topic>`` and the injected (non-finite) message for it."""
+        from crtk_msgs.msg import StringStamped  # type: ignore[import-untyped]  # the ros extra
+        from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
+        from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
+
+        from hardware_if import convert
+        from hardware_if.crtk import JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, periodic_qos
+
+        name = ArmTopics(self.arm).topic(topic)
+        message: Any
+        if topic == "state_command":
+            message, kind = StringStamped(string="disable"), StringStamped
+        elif topic.endswith("_js"):
+            names = (JAW_JOINT_NAME,) if topic.startswith("jaw/") else JOINT_NAMES
+            message, kind = convert.joint_state(names, [float("nan")] * len(names)), JointState
+        elif topic.endswith("_cp"):
+            message = convert.pose_stamped(np.eye(4), f"{self.arm}_base")
+            message.pose.position.x = float("nan")
+            kind = PoseStamped
+        else:
+            message = convert.wrench_stamped(np.array([float("nan"), 0.0, 0.0]), frame_id=f"{self.arm}_tip")
+            kind = WrenchStamped
+        # The simulated console subscribes to state_command volatile: the periodic QoS matches it.
+        return self.node.create_publisher(kind, name, periodic_qos()), message
+
+    def tracking_message(self) -> Any:
+        """A ``setpoint_js`` 1 rad from anywhere the arm can be on outer_yaw (beyond the 0.5 rad trip)."""
+        from hardware_if import convert
+        from hardware_if.crtk import JOINT_NAMES
+
+        return convert.joint_state(JOINT_NAMES, [3.0, 0.0, 0.1, 0.0, 0.0, 0.0])
+
+    def flood(self, publisher: Any, message: Any, lines: _Lines, text: str, timeout_s: float) -> bool:
+        """Publish ``message`` until the deploy's output shows ``text`` (the client saw it)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline and not lines.ended:
+            if publisher.get_subscription_count() > 0:
+                publisher.publish(message)
+            if lines.wait_for(text, 0.002):
+                return True
+        return False
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self._rclpy.shutdown(context=self.context)
+
+
+def _recording_facts(record: Path) -> tuple[str, int, list[str], bool]:
+    try:
+        recording = load_recording(record)
+    except Exception as e:  # the table says what the recording lacks
+        return f"unreadable: {e}", 0, [], False
+    summary = summarize_recording(recording)
+    text = (
+        f"{len(summary.episodes)} episode(s), {summary.commands} commands ({summary.commands_sent} sent), "
+        f"{len(summary.holds)} hold(s)" + (", truncated" if summary.truncated else "")
+    )
+    return text, len(summary.episodes), summary.holds, summary.truncated
+
+
+def run_fault(fault: Fault, workdir: Path, domain_id: int, *, guard_s: float = 300.0) -> FaultResult:
+    """Run one fault in ``workdir`` on ROS domain ``domain_id``; return what happened.
+
+    ``guard_s`` only bounds a run that went wrong; a correct one ends as soon as its deploy does. When
+    another machine user's arm shares the domain (the deploy holds on ``publisher conflict``), the fault
+    runs again on another domain, up to twice.
+    """
+    for attempt in range(3):
+        result = _run_fault(fault, workdir, 1 + (domain_id - 1 + 37 * attempt) % 100, guard_s)
+        if "publisher conflict" not in result.hold or "publisher conflict" in fault.reason:
+            break
+    return result
+
+
+def _run_fault(fault: Fault, workdir: Path, domain_id: int, guard_s: float) -> FaultResult:
+    workdir.mkdir(parents=True, exist_ok=True)
+    env = _child_env(domain_id)
+    env[AT_VARIABLE] = fault.at
+    gate = workdir / "go"
+    gate.unlink(missing_ok=True)
+    env[GATE_VARIABLE] = str(gate)
+    record = workdir / "run.mcap"
+    record.unlink(missing_ok=True)
+    deploy = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", f"{_MODULE}:{fault.policy}"]
+    deploy += ["--target", fault.target, "--task", "lift", "--seed", str(SEED), "--record", str(record)]
+    deploy += ["--episodes", str(fault.episodes), *fault.extra]
+    if not fault.default_budget:
+        deploy += ["--policy-budget", str(GUARD_S)]
+    if fault.target == "dvrk":
+        deploy += ["--domain-id", str(domain_id)]
+        if "--wait" not in fault.extra:
+            deploy += ["--wait", "60"]
+        if not fault.default_deadman:
+            config = workdir / "safety.toml"
+            config.write_text("deadman_timeout_s = 1.0\n")
+            deploy += ["--safety-config", str(config)]
+    console = injector = None
+    lines: _Lines | None = None
+    process: subprocess.Popen[str] | None = None
+    try:
+        if fault.target == "dvrk":
+            server = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--domain-id", str(domain_id)]
+            console = _start([*server, "--task", "lift", "--seed", str(SEED)], env)
+            if "--dry-run" in fault.extra and "not ready" not in fault.reason:
+                _enable(domain_id, guard_s)
+        if fault.action.startswith(("nan:", "early:", "tracking", "disable")):
+            injector = _Injector(domain_id)
+        process = _start(deploy, env)
+        lines = _Lines(process)
+        if fault.action and not fault.action.startswith("early:"):
+            lines.wait_for(MARK, guard_s)  # mid-episode: after the ticks of the steps before the fault step
+        if fault.action.startswith(("nan:", "early:")) and injector is not None:
+            topic = fault.action.split(":", 1)[1]
+            publisher, message = injector.publisher(topic)
+            injector.flood(publisher, message, lines, "invalid data", guard_s)
+        elif fault.action == "tracking" and injector is not None:
+            publisher, _ = injector.publisher("setpoint_js")
+            injector.flood(publisher, injector.tracking_message(), lines, "holding, tracking error", guard_s)
+        elif fault.action == "disable" and injector is not None:
+            publisher, message = injector.publisher("state_command")
+            injector.flood(publisher, message, lines, "holding, not ready", guard_s)
+        elif fault.action == "kill-console" and console is not None:
+            console.kill()
+            console.wait()
+        elif fault.action.startswith("signal:"):
+            process.send_signal(signal.Signals[fault.action.split(":", 1)[1]])
+        elif fault.action == "kill-deploy":
+            process.kill()
+        gate.touch()
+        status = process.wait(timeout=guard_s)
+        output = lines.rest(guard_s)
+    finally:
+        if process is not None and process.poll() is None:
+            process.kill()
+            process.wait()
+        if injector is not None:
+            injector.close()
+        if console is not None:
+            _stop(console)
+    hold = next((line.strip() for line in output.splitlines() if "HOLD:" in line or "interrupted (" in line), "")
+    text, kept, holds, truncated = _recording_facts(record)
+    return FaultResult(fault, status, hold, "Traceback" in output, text, output, kept, holds, truncated)
+
+
+def _enable(domain_id: int, guard_s: float) -> None:
+    """Enable and home the simulated arm (a dry run does not), with a client of its own context."""
+    import rclpy  # the ros extra
+    from rclpy.context import Context
+
+    from hardware_if.psm_client import PsmClient
+
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        client = PsmClient("PSM1", node_name=f"fault_enable_{os.getpid()}", context=context)
+        with client:
+            client.wait_for_measurement(guard_s)
+            client.enable(guard_s)
+            client.home(guard_s)
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def scratch_dir() -> Path:
+    """A fresh folder for a run's files."""
+    return Path(tempfile.mkdtemp(prefix="tissue-retract-faults-"))
