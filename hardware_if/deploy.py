@@ -51,6 +51,8 @@ from safety.chain import ControlChain
 from safety.config import SafetyConfig
 from sim.evaluation import run_episode
 from sim.scene import PhysicsParams
+from sim.scene3d import PsmScene
+from sim.scene_stream import LiveScene, SceneStream, StreamScene
 
 __all__ = ["EXIT_HOLD", "EXIT_INTERRUPTED", "STOP_SIGNALS", "DeployOptions", "DeployReport", "Interrupted", "deploy"]
 
@@ -131,6 +133,8 @@ class DeployOptions:
         wait_s: How long to wait for the arm's first measurement, the task topics, and for the arm to be
             ENABLED, homed and idle at each episode start [s]; running out is a hold.
         policy_budget_s: Longest a policy step may take [s]; None: one policy period. Slower is a hold.
+        live: Serve the 3-D scene for the Foxglove app on ws://127.0.0.1 at this port (0 picks one);
+            None serves nothing. The recording holds the same scene either way.
     """
 
     policy: str
@@ -145,6 +149,7 @@ class DeployOptions:
     seed: int = 0
     wait_s: float = 30.0
     policy_budget_s: float | None = None
+    live: int | None = None
 
     def __post_init__(self) -> None:
         if self.policy_budget_s is not None and not (np.isfinite(self.policy_budget_s) and self.policy_budget_s > 0):
@@ -266,7 +271,10 @@ def deploy(options: DeployOptions, *, echo: Any = print) -> DeployReport:
     """
     report = DeployReport(options.target, options.dry_run, options.record)
     stopper = _Stopper()
-    with stopper.installed(), Recorder(options.record) as recorder:
+    live_view = contextlib.nullcontext() if options.live is None else LiveScene(port=options.live)
+    with live_view as live, stopper.installed(), Recorder(options.record, mirror=live) as recorder:
+        if live is not None:
+            echo(f"live: ws://127.0.0.1:{live.port} (open it in the Foxglove app)")
         meta = {
             k: (str(v) if isinstance(v, Path | SafetyConfig) else v) for k, v in dataclasses.asdict(options).items()
         }
@@ -375,11 +383,14 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
     overrides: dict[str, Any] = {"safety_config": options.safety_config}
     if options.rate_hz is not None:
         overrides["physics"] = PhysicsParams(control_period_s=1.0 / options.rate_hz)
-    env = sim.envs.make(options.task, **overrides)
+    # The scene on the recording's wall clock, played at the physics' speed when someone watches live.
+    env = StreamScene(
+        sim.envs.make(options.task, **overrides), [recorder], realtime=recorder.mirror is not None, clock=time.time
+    )
     try:
         policy, reset = resolve_policy(options.policy, env)
         env.reset(seed=options.seed)  # builds the chain once; wrap it so every tick is recorded
-        unwrapped = env.unwrapped
+        unwrapped: Any = env.unwrapped
         unwrapped.controller = _RecordingChain(unwrapped.controller, report, recorder, stopper)
         budget = options.policy_budget_s or unwrapped.config.physics.step_s
         checked = _checked_policy(policy, budget)
@@ -510,7 +521,10 @@ def _dvrk_episode(
     measured = client.measure()
     # The chain works about the RCM, as in the simulation (its workspace box is an RCM box): the policy's
     # base-frame step is rotated into the RCM's axes and given as a local delta.
-    rotation_rcm_to_base = view.base_frame()[:3, :3]
+    base_frame = view.base_frame()
+    rotation_rcm_to_base = base_frame[:3, :3]
+    # The arm as measured and where the chain sends it (in a dry run: where it would), 20 times a second.
+    scene = SceneStream(PsmScene(view.model, f"{options.arm}_base", base_frame), [recorder], period_s=0.05)
     chain.reset(measured)
     reset()
     recorder.write("/deploy/event", {"kind": "episode_start", "episode": episode, "seed": seed})
@@ -553,6 +567,17 @@ def _dvrk_episode(
                 recorder.write("/deploy/command", _command_payload(output, sent, predicted))
                 _account(report, recorder, output)
                 report.commands_sent += int(sent)
+                scene.tick(
+                    time.time(),
+                    measured.q,
+                    measured.jaw,
+                    commanded_q=output.command.q,
+                    commanded_jaw=output.command.jaw,
+                    site=_task_point(view.listener, "site"),
+                    goal=_task_point(view.listener, "goal"),
+                    grasp=scene.scene.grasp_point(measured.q, measured.jaw),
+                    force_n=measured.force_n,
+                )
             if not status.ok:  # the dry run holds as the deploy would: it rehearses the real thing
                 fault = _deadman_hold(status.reason)
                 fault.data.update(episode=episode, step=step, measured=_measured_payload(measured))
@@ -574,6 +599,14 @@ def _dvrk_episode(
     if options.dry_run:
         entry["deadman"] = client.status.reason
     return entry
+
+
+def _task_point(listener: Any, name: str) -> np.ndarray | None:
+    """A task point for the scene, or None while there is none (the scene then leaves it out)."""
+    try:
+        return np.asarray(listener.point(name))
+    except DvrkError:
+        return None
 
 
 def _predicted_force(view: Any, measured: MeasuredState, command: JointCommand, stiffness_n_per_m: float) -> float:

@@ -16,6 +16,11 @@ Channels (:data:`CHANNELS`):
 - ``/deploy/event``: episode start/end, safety stops, deadman holds, faults, Ctrl-C (``kind``, ``text``).
 - ``/deploy/report``: once at the end, the run's summary.
 
+The 3-D scene (:mod:`sim.scene_stream`: ``/scene/transforms``, ``/scene/arm``, ``/scene/task``,
+``/scene/log``) is written beside them in Foxglove's own protobuf schemas (``foxglove.FrameTransforms``,
+``foxglove.SceneUpdate``, ``foxglove.Log``), so Foxglove shows the arm, the commanded arm, the tissue and
+the force in 3-D; readers of the JSON channels skip these.
+
 A recording survives a crash: the writer ends its chunk and flushes the file at least every
 :data:`FLUSH_PERIOD_S` of wall time (and at every episode end and hold), so a SIGKILL loses at most about
 the last second. :func:`read_recording` reads such a file, which lacks its summary and footer, with a
@@ -39,6 +44,8 @@ from mcap.records import Channel, Footer, Message
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
+from sim.scene_stream import LOG_TOPIC, SceneSink, log_message
+
 __all__ = ["CHANNELS", "CHUNK_SIZE_BYTES", "FLUSH_PERIOD_S", "Recorder", "RecordingRead", "read_recording"]
 
 #: A chunk is ended and the file flushed at least this often [s]: a crash loses at most this much.
@@ -57,6 +64,23 @@ CHANNELS = {
     "/deploy/event": "episode start/end, safety stops, holds, faults",
     "/deploy/report": "the run's summary, once",
 }
+
+
+#: Events that also go to the scene's log, and whether each is a warning.
+_LOGGED_EVENTS = {
+    "hold": True,
+    "fault": True,
+    "error": True,
+    "interrupted": True,
+    "safety_stop": True,
+    "episode_start": False,
+    "episode_end": False,
+}
+
+
+def _episode_text(payload: dict[str, Any]) -> str:
+    episode = f"episode {payload.get('episode')}"
+    return f"{episode}, success={payload['success']}" if "success" in payload else episode
 
 
 def _jsonable(value: Any) -> Any:
@@ -78,10 +102,13 @@ class Recorder:
 
     Args:
         path: Output file (``.mcap``); its folder is created.
+        mirror: Also sends the 3-D scene there (a live Foxglove view), message for message.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, mirror: SceneSink | None = None) -> None:
         self.path = Path(path)
+        self.mirror = mirror
+        self._interventions: tuple[str, ...] = ()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = self.path.open("wb")
         self._writer = Writer(self._file, chunk_size=CHUNK_SIZE_BYTES)
@@ -96,22 +123,63 @@ class Recorder:
             self._channels[topic] = self._writer.register_channel(
                 topic=topic, message_encoding="json", schema_id=schema_id
             )
+        self._scene_channels: dict[str, int] = {}
+        self._scene_schemas: dict[str, int] = {}
         self._closed = False
+
+    def write_message(self, topic: str, message: Any, t_s: float) -> None:
+        """Append a Foxglove SDK message (the 3-D scene) under its protobuf schema, stamped now.
+
+        ``t_s`` is the message's own time; the log time is the wall clock, as for every other channel.
+        """
+        if self._closed:
+            return
+        channel = self._scene_channels.get(topic)
+        if channel is None:
+            schema = message.get_schema()
+            if schema.name not in self._scene_schemas:
+                self._scene_schemas[schema.name] = self._writer.register_schema(
+                    name=schema.name, encoding=schema.encoding, data=bytes(schema.data)
+                )
+            channel = self._writer.register_channel(
+                topic=topic, message_encoding=schema.encoding, schema_id=self._scene_schemas[schema.name]
+            )
+            self._scene_channels[topic] = channel
+        self._add(channel, bytes(message.encode()))
+        if self.mirror is not None:
+            self.mirror.write_message(topic, message, t_s)
+
+    def _log_to_scene(self, topic: str, payload: dict[str, Any]) -> None:
+        """Holds, faults, safety stops, episodes and changes of the active interventions, as scene logs."""
+        text = None
+        if topic == "/deploy/event" and payload.get("kind") in _LOGGED_EVENTS:
+            kind = str(payload["kind"])
+            text = f"{kind.replace('_', ' ')}: {payload.get('text') or _episode_text(payload)}"
+            warning = _LOGGED_EVENTS[kind]
+        elif topic == "/deploy/command":
+            interventions = tuple(str(i) for i in payload.get("interventions", ()))
+            if interventions and interventions != self._interventions:
+                text, warning = f"interventions: {', '.join(interventions)}", False
+            self._interventions = interventions
+        if text is not None:
+            now = time.time()
+            self.write_message(LOG_TOPIC, log_message(now, text, warning=warning), now)
+
+    def _add(self, channel: int, data: bytes) -> None:
+        now = time.time_ns()
+        self._writer.add_message(channel, log_time=now, data=data, publish_time=now, sequence=self._sequence)
+        self._sequence += 1
+        if time.monotonic() - self._flushed_s >= FLUSH_PERIOD_S:
+            self.flush()
 
     def write(self, topic: str, payload: dict[str, Any]) -> None:
         """Append one message to a channel of :data:`CHANNELS`, stamped now."""
         if self._closed:
             return
-        now = time.time_ns()
-        data = json.dumps(_jsonable(payload), separators=(",", ":")).encode()
-        self._writer.add_message(
-            self._channels[topic], log_time=now, data=data, publish_time=now, sequence=self._sequence
-        )
-        self._sequence += 1
+        self._add(self._channels[topic], json.dumps(_jsonable(payload), separators=(",", ":")).encode())
         self.counts[topic] += 1
-        if time.monotonic() - self._flushed_s >= FLUSH_PERIOD_S or (
-            topic == "/deploy/event" and payload.get("kind") in _FLUSH_EVENTS
-        ):
+        self._log_to_scene(topic, payload)
+        if topic == "/deploy/event" and payload.get("kind") in _FLUSH_EVENTS:
             self.flush()
 
     def flush(self) -> None:
@@ -150,7 +218,7 @@ class RecordingRead:
         with Path(path).open("rb") as f:
             try:
                 reader = make_reader(f)
-                for _, channel, message in reader.iter_messages(log_time_order=True):
+                for _, channel, message in reader.iter_messages(topics=list(CHANNELS), log_time_order=True):
                     self.messages.append((channel.topic, message.log_time * 1e-9, json.loads(message.data)))
                 return
             except (McapError, EOFError, ValueError, struct_error):
@@ -161,7 +229,7 @@ class RecordingRead:
             rows: list[tuple[int, str, dict[str, Any]]] = []
             try:
                 for record in StreamReader(f, skip_magic=False).records:
-                    if isinstance(record, Channel):
+                    if isinstance(record, Channel) and record.topic in CHANNELS:  # the JSON channels
                         channels[record.id] = record.topic
                     elif isinstance(record, Message) and record.channel_id in channels:
                         rows.append((record.log_time, channels[record.channel_id], json.loads(record.data)))

@@ -1,8 +1,9 @@
 """A run as a 3-D scene in Foxglove's own schemas: the arm, the commanded pose, the tissue, the force.
 
-Frames: every URDF link with a shape is a frame ``<prefix><link>`` under the scene's root frame (the
-arm's ``<arm>_base``), placed by the Pinocchio kinematics at the given joints, so Foxglove draws the arm
-as it was; a second prefix (``commanded/``) draws where the chain sent it, in another colour. The link
+Frames: the RCM is the frame ``rcm`` under the scene's root frame (the arm's ``<arm>_base``, or the
+simulation's ``world``), and every URDF link with a shape is a frame ``<prefix><link>`` under ``rcm``,
+placed by the Pinocchio kinematics at the given joints, so Foxglove draws the arm as it was; a second
+prefix (``commanded/``) draws where the chain sent it, in another colour. The link
 shapes are the URDF's own primitives (cylinders and boxes), parsed from the file the models load. The
 tissue flap is a triangle list of its nodes; the grasp site and goal are spheres, the force on the grasp
 an arrow whose length is proportional to the force.
@@ -37,10 +38,12 @@ from foxglove.messages import (
 )
 
 from psm_control.robot import PsmModel
+from psm_control.urdf import GRASP_FRAME
 
 __all__ = [
     "COMMANDED_PREFIX",
     "FORCE_ARROW_M_PER_N",
+    "RCM_FRAME",
     "LinkShape",
     "PsmScene",
     "link_shapes",
@@ -50,6 +53,8 @@ __all__ = [
 
 #: Frame prefix of the arm drawn where the chain commanded it.
 COMMANDED_PREFIX = "commanded/"
+#: The remote centre of motion's frame, the parent of the links' frames.
+RCM_FRAME = "rcm"
 #: Length of the force arrow per newton [m/N]: 1 N draws 2 cm, on the scale of the flap.
 FORCE_ARROW_M_PER_N = 0.02
 _COMMANDED_RGBA = (0.2, 0.6, 1.0, 0.45)
@@ -176,25 +181,31 @@ class PsmScene:
         self._configuration = model.configuration()
 
     def link_poses(self, q: np.ndarray, jaw: float = 0.0) -> dict[str, np.ndarray]:
-        """4x4 pose of every link with a shape, in the root frame, at joints ``q`` and jaw angle ``jaw``."""
+        """4x4 pose of every link with a shape about the RCM, at joints ``q`` and jaw angle ``jaw``."""
         self._configuration.update(q, jaw)
-        return {link: self.base_frame @ self._configuration.frame_pose_local(link) for link in self.links}
+        return {link: self._configuration.frame_pose_local(link) for link in self.links}
+
+    def grasp_point(self, q: np.ndarray, jaw: float = 0.0) -> np.ndarray:
+        """Where the jaws hold, in the root frame [m]."""
+        self._configuration.update(q, jaw)
+        return (self.base_frame @ self._configuration.frame_pose_local(GRASP_FRAME))[:3, 3]
 
     def transforms(self, t_s: float, q: np.ndarray, jaw: float = 0.0, prefix: str = "") -> FrameTransforms:
-        """The links' frames at ``q`` (under ``prefix``), as Foxglove frame transforms."""
+        """The RCM's frame and the links' frames at ``q`` (under ``prefix``), as Foxglove frame transforms."""
         stamp = timestamp(t_s)
-        return FrameTransforms(
-            transforms=[
-                FrameTransform(
-                    timestamp=stamp,
-                    parent_frame_id=self.root_frame,
-                    child_frame_id=prefix + link,
-                    translation=Vector3(x=float(pose[0, 3]), y=float(pose[1, 3]), z=float(pose[2, 3])),
-                    rotation=_quaternion(pose[:3, :3]),
-                )
-                for link, pose in self.link_poses(q, jaw).items()
-            ]
-        )
+
+        def transform(parent: str, child: str, pose: np.ndarray) -> FrameTransform:
+            x, y, z = (float(v) for v in pose[:3, 3])
+            return FrameTransform(
+                timestamp=stamp,
+                parent_frame_id=parent,
+                child_frame_id=child,
+                translation=Vector3(x=x, y=y, z=z),
+                rotation=_quaternion(pose[:3, :3]),
+            )
+
+        links = [transform(RCM_FRAME, prefix + link, pose) for link, pose in self.link_poses(q, jaw).items()]
+        return FrameTransforms(transforms=[transform(self.root_frame, RCM_FRAME, self.base_frame), *links])
 
     def arm(self, t_s: float, prefix: str = "") -> SceneUpdate:
         """The link shapes, locked to their frames; the ``commanded/`` arm is translucent blue."""

@@ -10,7 +10,7 @@ the MCAP recorder writes the message's protobuf encoding under its Foxglove sche
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import foxglove
@@ -31,6 +31,7 @@ __all__ = [
     "SceneSink",
     "SceneStream",
     "StreamScene",
+    "log_message",
 ]
 
 #: The scene's topics: frames of the measured (and commanded) arm, link shapes, tissue and markers, events.
@@ -41,6 +42,12 @@ LOG_TOPIC = "/scene/log"
 
 #: The link shapes are sent again this often [s], so that a player seeking into a recording finds them.
 _ARM_REPEAT_S = 1.0
+
+
+def log_message(t_s: float, text: str, *, warning: bool = False) -> Log:
+    """An event (a hold, an intervention) as a Foxglove log message for :data:`LOG_TOPIC`."""
+    level = LogLevel.Warning if warning else LogLevel.Info
+    return Log(timestamp=timestamp(t_s), level=level, message=text, name="tissue-retract")
 
 
 class SceneSink(Protocol):
@@ -88,6 +95,12 @@ class LiveScene:
         for channel in self._channels.values():
             channel.close()
         self._server.stop()
+
+    def __enter__(self) -> LiveScene:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 class SceneStream:
@@ -148,10 +161,7 @@ class SceneStream:
 
     def log(self, t_s: float, message: str, *, warning: bool = False) -> None:
         """An event (a hold, an intervention) as a Foxglove log message."""
-        if not self.sinks:
-            return
-        level = LogLevel.Warning if warning else LogLevel.Info
-        self._send(LOG_TOPIC, Log(timestamp=timestamp(t_s), level=level, message=message, name="tissue-retract"), t_s)
+        self._send(LOG_TOPIC, log_message(t_s, message, warning=warning), t_s)
 
 
 class StreamScene(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray], np.ndarray]):
@@ -165,16 +175,27 @@ class StreamScene(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.nd
         sinks: Where the scene goes (a recording, a :class:`LiveScene`).
         realtime: Wait between steps so that the scene plays at the speed of the physics, for a person
             watching live; the episodes' outcomes do not depend on it.
+        clock: The scene's time [s] (``time.time`` to match a recording's wall-clock channels); None runs
+            a clock of the simulation's own, from 0.
     """
 
-    def __init__(self, env: gym.Env[Any, Any], sinks: Sequence[SceneSink], *, realtime: bool = False) -> None:
+    def __init__(
+        self,
+        env: gym.Env[Any, Any],
+        sinks: Sequence[SceneSink],
+        *,
+        realtime: bool = False,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
         super().__init__(env)
         simulation = env.unwrapped
         self.stream = SceneStream(PsmScene(simulation.model, "world"), sinks)  # type: ignore[attr-defined]
+        self.clock = clock
         physics = simulation.config.physics  # type: ignore[attr-defined]
         self.step_s = physics.time_step_s * physics.substeps
         self.realtime = realtime
         self.t_s = 0.0
+        self._sim_s = 0.0
         self._wall_start = time.monotonic()
 
     def reset(self, **kwargs: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -190,7 +211,7 @@ class StreamScene(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.nd
         return observation, float(reward), terminated, truncated, info
 
     def _stream(self, info: dict[str, Any]) -> None:
-        self.t_s += self.step_s
+        self.t_s = self.clock() if self.clock is not None else self.t_s + self.step_s
         simulation: Any = self.env.unwrapped
         scene, backend = simulation.scene, simulation.backend
         base = np.eye(4)
@@ -210,6 +231,7 @@ class StreamScene(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.nd
             force_n=np.asarray(info.get("force_n", np.zeros(3)), dtype=float),
         )
         if self.realtime:
-            ahead = self.t_s - (time.monotonic() - self._wall_start)
+            self._sim_s += self.step_s
+            ahead = self._sim_s - (time.monotonic() - self._wall_start)
             if ahead > 0:  # pacing for a person watching, not synchronisation
                 time.sleep(ahead)

@@ -10,7 +10,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from psm_control.robot import PsmModel
 from sim.psm_body import PsmBody
-from sim.scene3d import COMMANDED_PREFIX, FORCE_ARROW_M_PER_N, PsmScene, link_shapes
+from sim.scene3d import COMMANDED_PREFIX, FORCE_ARROW_M_PER_N, RCM_FRAME, PsmScene, link_shapes
 
 
 def decode(message: Any) -> Any:
@@ -51,12 +51,18 @@ def test_link_frames_agree_with_pybullet_at_random_joints() -> None:
             jaw = float(rng.uniform(0.0, 1.0))
             body.reset_joints(q, jaw)
             message = decode(scene.transforms(2.5, q, jaw, prefix=COMMANDED_PREFIX))
-            assert {t.child_frame_id for t in message.transforms} == {COMMANDED_PREFIX + link for link in scene.links}
-            for t in message.transforms:
-                assert t.parent_frame_id == "PSM1_base"
+            frames = {t.child_frame_id: t for t in message.transforms}
+            assert set(frames) == {RCM_FRAME} | {COMMANDED_PREFIX + link for link in scene.links}
+            rcm = frames.pop(RCM_FRAME)
+            assert rcm.parent_frame_id == "PSM1_base"
+            np.testing.assert_allclose(_matrix(rcm.translation, rcm.rotation), base, atol=1e-12)
+            for name, t in frames.items():
+                assert t.parent_frame_id == RCM_FRAME
                 assert (t.timestamp.seconds, t.timestamp.nanos) == (2, 500_000_000)
-                link = t.child_frame_id.removeprefix(COMMANDED_PREFIX)
-                np.testing.assert_allclose(_matrix(t.translation, t.rotation), body.link_pose(link), atol=1e-6)
+                link = name.removeprefix(COMMANDED_PREFIX)
+                world = base @ _matrix(t.translation, t.rotation)
+                np.testing.assert_allclose(world, body.link_pose(link), atol=1e-6)
+            np.testing.assert_allclose(scene.grasp_point(q, jaw), body.link_pose("grasp_link")[:3, 3], atol=1e-6)
     finally:
         p.disconnect(client)
 

@@ -90,9 +90,9 @@ def test_live_server_serves_the_scene_on_loopback() -> None:
         live.close()
     sent = decode(PsmScene(model, "PSM1_base").transforms(1.0, model.home(), 0.0))
     assert frames == sent.SerializeToString()
-    assert np.isclose(
-        sent.transforms[0].translation.z, model.configuration(model.home()).frame_pose_local("insertion_link")[2, 3]
-    )
+    insertion = next(t for t in sent.transforms if t.child_frame_id == "insertion_link")
+    home = model.configuration(model.home())
+    assert np.isclose(insertion.translation.z, home.frame_pose_local("insertion_link")[2, 3])
 
 
 def test_evaluate_live_serves_the_simulation_scene() -> None:

@@ -18,7 +18,10 @@ a subscribed topic, an arm not ENABLED, homed and idle when an episode starts (w
 last verified command), records the fault, prints ``HOLD: <reason>`` and exits with status 4.
 Ctrl-C (SIGINT), SIGTERM and SIGHUP stop between two control ticks and close the recording; the exit
 status is 128 + the signal: 130, 143, 129.
-Every run is recorded to MCAP (``--record``, default ``runs/deploy-<time>.mcap``; see ``replay``).
+Every run is recorded to MCAP (``--record``, default ``runs/deploy-<time>.mcap``; see ``replay``), with its
+3-D scene in Foxglove's schemas: the measured arm, the commanded arm (translucent blue; in a dry run, where
+it would be sent), the tissue, site, goal and force, and holds as log messages; ``--live [PORT]`` serves the
+same scene on ws://127.0.0.1:PORT while it runs (layout: ``docs/foxglove/tissue-retract-layout.json``).
 
 Discovery stays on localhost (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) for dry runs and unless
 ``--network`` is given; ``--domain-id`` (default ``$ROS_DOMAIN_ID`` or 0) must match the robot's. To reach
@@ -38,6 +41,7 @@ from hardware_if.deploy import DeployOptions, deploy
 from hardware_if.network import apply_local_ros_env, environment_domain_id
 from psm_control.errors import ConfigurationError
 from safety.config import load_safety_config
+from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
 
@@ -54,6 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dry-run", action="store_true", help="compute and record, publish nothing on motion topics")
     parser.add_argument("--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml)")
     parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
+    add_live_argument(parser)
     parser.add_argument("--episodes", type=int, default=1, help="episodes (default: 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
     parser.add_argument(
@@ -103,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         wait_s=args.wait,
         policy_budget_s=args.policy_budget,
+        live=args.live,
     )
     report = deploy(options, echo=lambda line: print(line, flush=True))
     for line in report.lines():

@@ -21,6 +21,7 @@ from psm_control.errors import ConfigurationError
 from safety.config import load_safety_config
 from sim.evaluation import run_episode, summarize, timed
 from sim.scene_stream import LiveScene, StreamScene
+from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
 
@@ -36,15 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml), e.g. force_limit_n"
     )
     parser.add_argument("--json", metavar="FILE", default=None, help="write {summary, episodes} as JSON")
-    parser.add_argument(
-        "--live",
-        type=int,
-        nargs="?",
-        const=8765,
-        default=None,
-        metavar="PORT",
-        help="serve the 3-D scene for the Foxglove app on ws://127.0.0.1:PORT (default 8765), in real time",
-    )
+    add_live_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
