@@ -311,6 +311,7 @@ class ControlChain:
                 force,
                 stiffness,
                 self.control_period_s,
+                self._jaw < self.config.gripping_below_rad,
             )
             try:
                 result = self.filter.filter(state, dq_nominal)

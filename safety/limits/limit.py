@@ -30,6 +30,8 @@ class FilterState(NamedTuple):
         retraction_force_n: Force the tool applies to the tissue (3,), base axes [N].
         stiffness_n_per_m: Current tissue stiffness estimate along the force direction [N/m].
         dt: Control period [s].
+        gripping: The jaw is closed (or closing) on tissue, so a force may build up from any direction even
+            while none is measured yet; the force limit then bounds the step in every direction.
     """
 
     q: np.ndarray
@@ -39,6 +41,7 @@ class FilterState(NamedTuple):
     retraction_force_n: np.ndarray
     stiffness_n_per_m: float
     dt: float
+    gripping: bool = True
 
 
 class LimitReport(NamedTuple):

@@ -26,7 +26,7 @@ from sim.backend import SimBackend
 from sim.control import make_controller
 from sim.exposure import exposed_fraction, surface_samples
 from sim.grasp import GraspParams
-from sim.mechanics import DamageLimits, measure
+from sim.mechanics import DamageLimits, grasp_force, measure
 from sim.randomization import INSERTION_M_PER_RAD, Randomizer
 from sim.rendering import Camera, Frame, render
 from sim.scene import HIDDEN_HALF_EXTENTS_M, PhysicsParams, Scene
@@ -214,6 +214,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             else:
                 self.scene.step_physics(count)
             done += count
+            self._sense_force()
             measured = self._measured()
         previous = self._nodes
         self._nodes = self.scene.tissue.positions()
@@ -304,6 +305,25 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         clipped = np.clip(raw, -1.0, 1.0)
         events["action_clipped"] = bool(np.any(clipped != raw))
         return clipped
+
+    def _sense_force(self) -> None:
+        """Refresh the force reading between control ticks, as a force sensor would be read every tick.
+
+        Read only once per environment step, the chain's second tick saw the force from before the first
+        tick's motion, so its prediction started from a force the tissue no longer had (measured: a
+        0.4 N limit passed by up to 1.8x).
+        """
+        assert self.scene is not None
+        grasp = self.scene.grasp
+        if not grasp.holding:
+            return
+        t = self.scene.tissue
+        nodes = t.positions()
+        if np.all(np.isfinite(nodes)):
+            self._force = grasp_force(
+                nodes, t.edges, t.rest_lengths, t.params.stiffness_n_per_m, grasp.nodes, t.node_mass_kg,
+                self.scene.gravity_m_s2,
+            )  # fmt: skip
 
     def _measured(self) -> MeasuredState:
         self.backend.force_n = self._force
