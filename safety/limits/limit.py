@@ -32,6 +32,9 @@ class FilterState(NamedTuple):
         dt: Control period [s].
         gripping: The jaw is closed (or closing) on tissue, so a force may build up from any direction even
             while none is measured yet; the force limit then bounds the step in every direction.
+        grasp_jacobian: Linear Jacobian (3, 6) of the point the jaws hold, base axes, where the tissue's
+            force acts; None: ``tool_jacobian``. The wrist moves the jaws about the tool tip, so a step can
+            leave the tip still and pull the tissue.
     """
 
     q: np.ndarray
@@ -42,6 +45,7 @@ class FilterState(NamedTuple):
     stiffness_n_per_m: float
     dt: float
     gripping: bool = True
+    grasp_jacobian: np.ndarray | None = None
 
 
 class LimitReport(NamedTuple):

@@ -38,7 +38,7 @@ class RetractionForceLimit(Limit):
     """Keep the predicted retraction-force magnitude below ``F_max`` in every direction of motion (soft).
 
     With the force ``F`` the tool applies to the tissue, its direction ``n`` and a frame ``(n, t1, t2)``,
-    a tool displacement ``d = J dq`` on tissue of stiffness ``K`` (isotropic, the estimate) gives
+    a displacement ``d = J dq`` of the point the jaws hold on tissue of stiffness ``K`` (isotropic, the estimate) gives
     ``|F + K d|^2 = (|F| + K d_n)^2 + K^2 (d_t1^2 + d_t2^2)``, which never exceeds
     ``(|F| + K (d_n + |d_t1| + |d_t2|))^2``. So the four rows
     ``K (d_n +- d_t1 +- d_t2) <= F_max - |F|`` bound the magnitude, not only its component along ``n``:
@@ -55,18 +55,24 @@ class RetractionForceLimit(Limit):
     the joint-acceleration rows push it out to at least the braking distance of motion under way, so
     the force predicted here is the force at the end of the stop, not the one a tick later.
 
+    The rows plan to ``(1 - reserve) F_max``: the reserve absorbs what the quasi-static prediction misses
+    (the tissue still moving after the tool stops, a reading one tick old).
+
     Args:
         force_limit_n: ``F_max`` [N].
         min_force_n: Smallest force whose direction is used [N].
         dof: Number of joints.
+        reserve: Fraction of ``F_max`` the plan keeps unused, in [0, 1).
     """
 
     name = "retraction_force"
     soft = True
     rows = 8
 
-    def __init__(self, force_limit_n: float, min_force_n: float = 0.05, dof: int = 6) -> None:
+    def __init__(self, force_limit_n: float, min_force_n: float = 0.05, dof: int = 6, reserve: float = 0.0) -> None:
         self.force_limit_n = float(force_limit_n)
+        self.reserve = float(reserve)
+        self._planned_n = self.force_limit_n * (1.0 - self.reserve)
         self.min_force_n = float(min_force_n)
         self._G = np.zeros((self.rows, dof))
         self._h = np.full(self.rows, np.inf)
@@ -83,8 +89,9 @@ class RetractionForceLimit(Limit):
             h[:] = np.inf
             return G, h
         frame = _frame(force / magnitude if known else self._up)
-        budget = self.force_limit_n - (magnitude if math.isfinite(magnitude) else 0.0)
-        np.matmul(state.stiffness_n_per_m * (_SIGNS @ frame), state.tool_jacobian, out=G)
+        budget = self._planned_n - (magnitude if math.isfinite(magnitude) else 0.0)
+        jacobian = state.tool_jacobian if state.grasp_jacobian is None else state.grasp_jacobian
+        np.matmul(state.stiffness_n_per_m * (_SIGNS @ frame), jacobian, out=G)
         h[:] = budget
         if known:
             G[4:] = 0.0
