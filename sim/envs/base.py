@@ -165,6 +165,8 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 config=cfg.safety_config,
             )
         self.controller.log.clear()
+        self.controller.force_warnings.clear()
+        self._warnings_seen = 0
         self.controller.reset(self.backend.measure())
         self._nodes = self.scene.tissue.positions()
         self._exposure_points = surface_samples(self.scene.hidden_centre, HIDDEN_HALF_EXTENTS_M)
@@ -224,6 +226,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.scene.grasp.release()
         else:
             self._update_tissue(events)
+        self._force_events(events)
         events.update(
             sim_unstable=unstable,
             safety_stop=stops > 0,
@@ -305,6 +308,24 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         clipped = np.clip(raw, -1.0, 1.0)
         events["action_clipped"] = bool(np.any(clipped != raw))
         return clipped
+
+    def _force_events(self, events: dict[str, Any]) -> None:
+        """``force_limit_exceeded`` with its amount and the time spent above the limit, and new warnings."""
+        assert self.controller is not None
+        monitor = self.controller.force_monitor
+        finished, current = monitor.take(), monitor.current
+        limit = monitor.force_limit_n
+        peaks = [e.peak_n for e in finished] + ([current.peak_n] if current is not None else [])
+        peaks.append(float(np.linalg.norm(self._force)))
+        exceeded = bool(finished) or current is not None or peaks[-1] > limit
+        events["force_limit_exceeded"] = exceeded
+        events["force_excess_n"] = max(peaks) - limit if exceeded else 0.0
+        events["force_exceeded_s"] = sum(e.duration_s for e in monitor.events) + (
+            current.duration_s if current is not None else 0.0
+        )
+        warnings = self.controller.force_warnings
+        events["force_warning"] = " | ".join(warnings[self._warnings_seen :])
+        self._warnings_seen = len(warnings)
 
     def _sense_force(self) -> None:
         """Refresh the force reading between control ticks, as a force sensor would be read every tick.
@@ -421,6 +442,10 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "safety_stop", "new_grasp",
         ):  # fmt: skip
             info[flag] = bool(events.get(flag, False))
+        info["force_limit_exceeded"] = bool(events.get("force_limit_exceeded", False))
+        info["force_excess_n"] = float(events.get("force_excess_n", 0.0))
+        info["force_exceeded_s"] = float(events.get("force_exceeded_s", 0.0))
+        info["force_warning"] = str(events.get("force_warning", ""))
         info["safety_stops"] = int(events.get("safety_stops", 0))
         info["safety_reason"] = str(events.get("safety_reason", ""))
         info["interventions"] = tuple(events.get("interventions", ()))

@@ -39,6 +39,8 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "p95": float(np.percentile(forces, 95)) if forces else None,
         },
         "safety_stops": sum(int(r.get("safety_stops") or 0) for r in finished),
+        "force_limit_exceeded": sum(int(r.get("force_limit_exceeded") or 0) for r in finished),
+        "max_force_excess_n": max((float(r.get("max_force_excess_n") or 0.0) for r in finished), default=0.0),
         "interventions": dict(sorted(interventions.items())),
         "failure_classes": dict(sorted(Counter(str(r.get("failure_class", "none")) for r in finished).items())),
     }
@@ -107,6 +109,8 @@ def write_report(
         f"- success: {100 * summary['success_rate']:.1f} % (95 % CI {100 * low:.1f} to {100 * high:.1f} %)",
         f"- peak force [N]: {summary['peak_force_n']}",
         f"- safety stops: {summary['safety_stops']}",
+        f"- force limit exceeded: {summary['force_limit_exceeded']} time(s), "
+        f"max excess {summary['max_force_excess_n']:.3f} N",
         f"- interventions: {summary['interventions']}",
         f"- failure classes: {summary['failure_classes']}",
         "",
