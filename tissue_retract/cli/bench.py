@@ -15,6 +15,7 @@ TARGETS: dict[str, str] = {
     "env": "environment steps/s (state-only and rendering)",
     "chain": "control-chain tick latency against a naive reference",
     "ros": "servo_jp -> measured_js round trip over loopback ROS 2",
+    "safety": "worst peak/limit force ratio over adversaries x tasks x force presets x tissue stiffness",
 }
 
 #: The targets are this command's own subcommands.
