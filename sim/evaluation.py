@@ -127,8 +127,8 @@ def run_episode(
 
 
 def _force_limit(env: Any) -> float:
-    controller = getattr(env.unwrapped, "controller", None)
-    return float(controller.config.effective_force_limit_n) if controller is not None else float("nan")
+    config = getattr(getattr(env.unwrapped, "controller", None), "config", None)
+    return float(config.effective_force_limit_n) if config is not None else float("nan")
 
 
 def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, Any]:

@@ -165,8 +165,9 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 config=cfg.safety_config,
             )
         self.controller.log.clear()
-        self.controller.force_warnings.clear()
         self._warnings_seen = 0
+        if isinstance(self.controller, ControlChain):  # sim-dvrk swaps in a set-point follower
+            self.controller.force_warnings.clear()
         self.controller.reset(self.backend.measure())
         self._nodes = self.scene.tissue.positions()
         self._exposure_points = surface_samples(self.scene.hidden_centre, HIDDEN_HALF_EXTENTS_M)
@@ -311,7 +312,8 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _force_events(self, events: dict[str, Any]) -> None:
         """``force_limit_exceeded`` with its amount and the time spent above the limit, and new warnings."""
-        assert self.controller is not None
+        if not isinstance(self.controller, ControlChain):  # no chain here: the client's chain watches
+            return
         monitor = self.controller.force_monitor
         finished, current = monitor.take(), monitor.current
         limit = monitor.force_limit_n
