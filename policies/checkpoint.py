@@ -258,7 +258,9 @@ def _bounded_json(path: Path, raw: bytes | str, what: str) -> Any:
     try:
         return json.loads(text)
     except (json.JSONDecodeError, RecursionError) as e:
-        raise CheckpointError(path, f"not a tissue-retract checkpoint: its {what} is not valid JSON") from e
+        raise CheckpointError(
+            path, f"not a safetensors checkpoint: its {what} is not valid JSON (a pickle or torch.save archive?)"
+        ) from e
 
 
 def load_checkpoint(path: str | Path) -> Checkpoint:
