@@ -295,6 +295,14 @@ def _cases(tmp: Path) -> list[Case]:
             ("--jobs", "0"),
         ),
     ]
+    cases.append(
+        Case(
+            "train-huge-buffer",
+            (*TOY_TRAIN, "--out", str(tmp / "o5"), *TOY_TRAIN_TAIL, "--set", "buffer_size=100000000000"),
+            ("buffer_size", "100000000000", "<= 2000000"),
+            (tmp / "o5",),
+        )
+    )
     (tmp / "tuned").mkdir()
     _write(tmp / "tuned" / "recommended_safety.yaml", "force_limit_n: 2.0\n")
     # Demonstrations.

@@ -98,7 +98,6 @@ def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -
         "policy_sha256": file_digest(args.policy),
         "task": task_id,
         "seed": args.seed,
-        "safety_config_sha256": file_digest(args.safety_config) if args.safety_config else None,
         "package_version": __version__,
         **settings,
     }
@@ -119,8 +118,8 @@ def run(args: argparse.Namespace) -> int:
     jobs = cap_jobs(args.jobs)
     overrides = safety_overrides(args.safety_config)
     out = args.out or Path("runs") / f"robustness-{task_id}"
-    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
     check_sweep_policy(args.policy, task_id, overrides, allow_other_task=args.allow_other_task)
+    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
     trials = make_trials(ranges, args.trials, mode=args.mode, seed=args.seed)
     kwargs = {
         "policy": args.policy,

@@ -116,8 +116,8 @@ def run(args: argparse.Namespace) -> int:
     )
     trials = tuning_trials(ranges, args.levels, args.episodes, seed=args.seed)
     out = args.out or Path("runs") / f"tune-safety-{task_id}"
-    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
     check_sweep_policy(args.policy, task_id, base, allow_other_task=args.allow_other_task)
+    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
     identity = sweep_identity(
         args,
         task_id,
