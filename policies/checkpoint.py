@@ -21,6 +21,7 @@ a file that is not safetensors (a pickle, a ``torch.save`` archive) is refused b
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import struct
@@ -39,6 +40,8 @@ from policies.algos import AGENTS, Agent, Dims, make_agent
 from policies.config import TrainConfig
 from policies.errors import CheckpointError, SpaceMismatchError
 from psm_control import __version__
+from psm_control.errors import ConfigurationError, InputFileError
+from psm_control.inputs import check_regular_file
 
 __all__ = [
     "FORMAT",
@@ -56,7 +59,14 @@ __all__ = [
 FORMAT = "tissue-retract-checkpoint"
 FORMAT_VERSION = 1
 _META_KEY = "tissue_retract"
-_MAX_HEADER_BYTES = 50_000_000
+#: Largest safetensors header read [bytes]: names, shapes and metadata, never tensor data.
+_MAX_HEADER_BYTES = 16_000_000
+#: Deepest nesting of a header's JSON (this format nests 4 levels).
+_MAX_HEADER_DEPTH = 32
+#: Largest checkpoint file [bytes]: a training checkpoint with a full default replay buffer is ~100 MB.
+_MAX_FILE_BYTES = 4_000_000_000
+#: Tensor groups holding network weights, which must be finite.
+_WEIGHT_GROUPS = ("actor.", "critic.", "actor_target.", "critic_target.", "extra.")
 
 
 def env_spaces(env: gym.Env[Any, Any]) -> dict[str, Any]:
@@ -115,7 +125,7 @@ class Checkpoint:
         """The training configuration."""
         try:
             return TrainConfig.from_dict(self.meta["config"])
-        except (KeyError, TypeError, ValueError) as e:
+        except (KeyError, TypeError, ValueError, ConfigurationError) as e:
             raise CheckpointError(self.path, f"invalid training configuration: {e}") from e
 
 
@@ -217,13 +227,40 @@ def _read_header(path: Path) -> dict[str, Any]:
             raw = f.read(length)
     except OSError as e:
         raise CheckpointError(path, f"cannot read: {e}") from e
-    try:
-        header = json.loads(raw)
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise CheckpointError(path, "not a safetensors file: its header is not JSON") from e
+    header = _bounded_json(path, raw, "header")
     if not isinstance(header, dict):
         raise CheckpointError(path, "not a safetensors file: its header is not a JSON object")
     return header
+
+
+def _bounded_json(path: Path, raw: bytes | str, what: str) -> Any:
+    """JSON nested at most :data:`_MAX_HEADER_DEPTH` levels, checked before it is parsed."""
+    text = raw.decode("utf-8") if isinstance(raw, bytes) else raw
+    depth = deepest = 0
+    in_string = escaped = False
+    for char in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif char == "\\":
+                escaped = True
+            elif char == '"':
+                in_string = False
+        elif char == '"':
+            in_string = True
+        elif char in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif char in "]}":
+            depth -= 1
+    if deepest > _MAX_HEADER_DEPTH:
+        raise CheckpointError(path, f"its {what} is nested {deepest} levels deep; at most {_MAX_HEADER_DEPTH} allowed")
+    try:
+        return json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as e:
+        raise CheckpointError(
+            path, f"not a safetensors checkpoint: its {what} is not valid JSON (a pickle or torch.save archive?)"
+        ) from e
 
 
 def load_checkpoint(path: str | Path) -> Checkpoint:
@@ -234,16 +271,20 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
             format's metadata, or is of a newer format version.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise CheckpointError(path, "no such file")
-    header = _read_header(path)
+    try:
+        check_regular_file(path, "--policy", _MAX_FILE_BYTES)
+    except InputFileError as e:
+        raise CheckpointError(path, f"not a usable file: expected {e.allowed}") from e
+    try:
+        header = _read_header(path)
+    except UnicodeDecodeError as e:
+        raise CheckpointError(path, "not a safetensors file: its header is not UTF-8 JSON") from e
     meta_raw = (header.get("__metadata__") or {}).get(_META_KEY)
     if not isinstance(meta_raw, str):
         raise CheckpointError(path, f"no {_META_KEY!r} metadata: not a tissue-retract checkpoint")
-    try:
-        meta = json.loads(meta_raw)
-    except json.JSONDecodeError as e:
-        raise CheckpointError(path, f"its metadata is not valid JSON: {e}") from e
+    meta = _bounded_json(path, meta_raw, "metadata")
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise CheckpointError(path, f"metadata format is not {FORMAT!r}")
     version = meta.get("format_version")
@@ -258,6 +299,11 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
                 tensors[key] = f.get_tensor(key)
     except Exception as e:
         raise CheckpointError(path, f"malformed tensor data: {e}") from e
+    for key, tensor in tensors.items():
+        if key.startswith(_WEIGHT_GROUPS) and tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise CheckpointError(
+                path, f"tensor {key!r} holds non-finite values (NaN or inf); only finite weights load"
+            )
     return Checkpoint(path, meta, tensors)
 
 
@@ -269,7 +315,7 @@ def _dims(ckpt: Checkpoint) -> Dims:
             int(np.prod(spaces["desired_goal"])),
             int(np.prod(spaces["action"]["shape"])),
         )
-    except (KeyError, TypeError) as e:
+    except (KeyError, TypeError, ValueError, OverflowError) as e:
         raise CheckpointError(ckpt.path, f"its spaces are incomplete: {e}") from e
 
 
@@ -288,13 +334,30 @@ def _restore_normalizers(ckpt: Checkpoint, agent: Agent) -> None:
         raise CheckpointError(ckpt.path, f"its normaliser statistics are invalid: {e}") from e
 
 
+def _check_network_size(ckpt: Checkpoint, dims: Dims, config: TrainConfig) -> None:
+    """Refuse metadata describing a larger actor than the file's tensors, before anything is allocated."""
+    sizes = [dims.obs + dims.goal, *config.hidden, dims.action]
+    if min(sizes) < 1:
+        raise CheckpointError(ckpt.path, f"its spaces give a network of layer sizes {sizes}")
+    implied = sum(a * b + b for a, b in itertools.pairwise(sizes))
+    stored = sum(int(t.numel()) for t in ckpt.group("actor").values())
+    if implied > stored:
+        raise CheckpointError(
+            ckpt.path,
+            f"its metadata describes an actor of layer sizes {sizes} ({implied} parameters) but the file holds "
+            f"{stored} actor parameters",
+        )
+
+
 def load_agent(ckpt: Checkpoint, seed: int = 0) -> Agent:
     """Rebuild the agent of a checkpoint: networks, normalisers and, for training checkpoints, optimisers.
 
     Raises:
         CheckpointError: The tensors do not fit the networks the metadata describes.
     """
-    agent = make_agent(_dims(ckpt), ckpt.config, seed)
+    dims, config = _dims(ckpt), ckpt.config
+    _check_network_size(ckpt, dims, config)
+    agent = make_agent(dims, config, seed)
     _restore_normalizers(ckpt, agent)
     modules = agent.modules() if ckpt.meta.get("kind") == "training" else {"actor": agent.actor}
     try:
@@ -343,15 +406,26 @@ class Policy:
         return (self.centre + self.half_range * a).astype(np.float32)
 
 
-def load_policy(path: str | Path, env: gym.Env[Any, Any]) -> Callable[[Mapping[str, np.ndarray]], np.ndarray]:
-    """The deterministic policy stored in a checkpoint, checked against ``env``'s spaces.
+def load_policy(
+    path: str | Path, env: gym.Env[Any, Any], *, allow_other_task: bool = False
+) -> Callable[[Mapping[str, np.ndarray]], np.ndarray]:
+    """The deterministic policy stored in a checkpoint, checked against ``env``'s spaces and task.
 
     Raises:
-        CheckpointError: The file is not a valid tensors-only checkpoint.
+        CheckpointError: The file is not a valid tensors-only checkpoint, or was trained for another task
+            (unless ``allow_other_task``).
         SpaceMismatchError: The checkpoint's spaces differ from ``env``'s.
     """
     ckpt = load_checkpoint(path)
     check_spaces(ckpt.path, ckpt.meta.get("spaces", {}), env)
+    trained_for = ckpt.meta.get("task_id")
+    task = env.spec.id if env.spec is not None else None
+    if not allow_other_task and task is not None and trained_for != task:
+        raise CheckpointError(
+            ckpt.path,
+            f"was trained for task {trained_for!r}, not {task!r}; pick --task to match, or pass "
+            "--allow-other-task to run it anyway",
+        )
     agent = load_agent(ckpt)
     agent.actor.eval()
     return Policy(agent, ckpt.meta)

@@ -21,6 +21,11 @@ __all__ = ["ALGORITHMS", "TrainConfig"]
 ALGORITHMS = ("ddpg", "sqil", "ddpgbc", "col", "dex")
 
 
+#: Largest network accepted (from --set or a checkpoint's header): a bound on what loading allocates.
+MAX_HIDDEN_WIDTH = 4096
+MAX_HIDDEN_LAYERS = 16
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Hyperparameters of one training run.
@@ -81,8 +86,15 @@ class TrainConfig:
             raise UnknownVariantError("algo", self.algo, ALGORITHMS)
         if self.hidden_sizes is not None:
             sizes = tuple(self.hidden_sizes)
-            if not sizes or any(not isinstance(h, int) or isinstance(h, bool) or h < 1 for h in sizes):
-                raise ConfigurationError("hidden_sizes", self.hidden_sizes, "a non-empty tuple of positive integers")
+            widths_ok = all(
+                isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= MAX_HIDDEN_WIDTH for h in sizes
+            )
+            if not sizes or len(sizes) > MAX_HIDDEN_LAYERS or not widths_ok:
+                raise ConfigurationError(
+                    "hidden_sizes",
+                    self.hidden_sizes,
+                    f"1 to {MAX_HIDDEN_LAYERS} layer widths, positive integers up to {MAX_HIDDEN_WIDTH}",
+                )
             object.__setattr__(self, "hidden_sizes", sizes)
         _in_range("gamma", self.gamma, 0.0, 1.0, low_open=False, high_open=True)
         _in_range("tau", self.tau, 0.0, 1.0, low_open=True, high_open=False)
@@ -90,8 +102,8 @@ class TrainConfig:
             value = getattr(self, name)
             if value is not None:
                 _in_range(name, value, 0.0, 1.0, low_open=True, high_open=False)
-        _int_at_least("batch_size", self.batch_size, 1)
-        _int_at_least("buffer_size", self.buffer_size, 1)
+        _int_at_least("batch_size", self.batch_size, 1, 65_536)
+        _int_at_least("buffer_size", self.buffer_size, 1, 2_000_000)
         _int_at_least("random_steps", self.random_steps, 0)
         _int_at_least("updates_per_episode", self.updates_per_episode, 0)
         _int_at_least("her_k", self.her_k, 0)
@@ -182,6 +194,6 @@ def _in_range(
         raise ConfigurationError(name, value, f"a finite number in {left}{low:g}, {high:g}{right}")
 
 
-def _int_at_least(name: str, value: object, low: int) -> None:
-    if not isinstance(value, int) or isinstance(value, bool) or value < low:
-        raise ConfigurationError(name, value, f"an integer >= {low}")
+def _int_at_least(name: str, value: object, low: int, high: int | None = None) -> None:
+    if not isinstance(value, int) or isinstance(value, bool) or value < low or (high is not None and value > high):
+        raise ConfigurationError(name, value, f"an integer >= {low}" + (f" and <= {high}" if high is not None else ""))

@@ -18,6 +18,7 @@ Only successful expert episodes are kept (``info["is_success"]`` and not ``info[
 
 from __future__ import annotations
 
+import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
@@ -28,6 +29,8 @@ import numpy as np
 from policies.buffers import Episode
 from policies.errors import DemonstrationError
 from policies.toy_env import TOY_TASK_ID, toy_expert
+from psm_control.errors import InputFileError
+from psm_control.inputs import check_regular_file
 from sim.expert import ScriptedExpert
 
 __all__ = ["Controller", "ExpertFactory", "collect_demos", "expert_for", "load_demos", "rollout"]
@@ -125,34 +128,128 @@ def collect_demos(
     return episodes
 
 
-def load_demos(path: str | Path, count: int | None = None) -> list[Episode]:
-    """Read demonstration episodes from a ``.npz`` file (the first ``count`` of them, or all).
+#: Largest demonstrations file [bytes] and largest total of its arrays once read [bytes].
+MAX_DEMOS_FILE_BYTES = 2_000_000_000
+MAX_DEMOS_ARRAY_BYTES = 2_000_000_000
+
+
+def _array_sizes(path: Path) -> dict[str, int]:
+    """Bytes each array of an ``.npz`` will take once read, from the ``.npy`` headers alone (nothing allocated).
 
     Raises:
-        DemonstrationError: The file is missing, holds objects, or lacks a required array.
+        DemonstrationError: Not a zip of ``.npy`` arrays, truncated, or arrays larger than allowed.
     """
+    sizes: dict[str, int] = {}
+    try:
+        with zipfile.ZipFile(path) as archive:
+            for info in archive.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with archive.open(info) as member:
+                    version = np.lib.format.read_magic(member)
+                    if version == (1, 0):
+                        shape, _, dtype = np.lib.format.read_array_header_1_0(member)
+                    else:
+                        shape, _, dtype = np.lib.format.read_array_header_2_0(member)
+                sizes[info.filename[: -len(".npy")]] = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError, TypeError) as e:
+        raise DemonstrationError(
+            f"--demos-file {path}: not a readable .npz of arrays (empty, truncated or another format: {e})"
+        ) from e
+    total = sum(sizes.values())
+    if total > MAX_DEMOS_ARRAY_BYTES:
+        raise DemonstrationError(
+            f"--demos-file {path}: its arrays would take {total} bytes once read; "
+            f"at most {MAX_DEMOS_ARRAY_BYTES} allowed"
+        )
+    return sizes
+
+
+def load_demos(path: str | Path, count: int | None = None, dims: tuple[int, int, int] | None = None) -> list[Episode]:
+    """Read demonstration episodes from a ``.npz`` file (the first ``count`` of them, or all).
+
+    Args:
+        path: The ``.npz`` file.
+        count: How many episodes to take (None: all).
+        dims: Expected (observation, goal, action) sizes of the task; None: not checked.
+
+    Raises:
+        DemonstrationError: The file is missing, not a regular file, too large, empty or truncated, holds
+            objects, lacks a required array, or holds arrays of the wrong shape or non-finite values.
+    """
+    path = Path(path)
+    try:
+        check_regular_file(path, "--demos-file", MAX_DEMOS_FILE_BYTES)
+    except InputFileError as e:
+        raise DemonstrationError(str(e)) from e
+    _array_sizes(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
-    except (OSError, ValueError) as e:
-        raise DemonstrationError(f"cannot read demonstrations from {path}: {e}") from e
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+        raise DemonstrationError(f"--demos-file {path}: cannot read demonstrations: {e}") from e
 
-    def pick(*names: str) -> np.ndarray:
+    def pick(*names: str, ndim: int) -> np.ndarray:
         for name in names:
             if name in arrays:
-                return np.asarray(arrays[name], dtype=np.float32)
-        raise DemonstrationError(f"{path} has no array named {' or '.join(names)} (it has {sorted(arrays)})")
+                array = arrays[name]
+                if not np.issubdtype(array.dtype, np.number) and array.dtype != bool:
+                    raise DemonstrationError(f"--demos-file {path}: {name} holds {array.dtype}, not numbers")
+                if array.ndim != ndim:
+                    raise DemonstrationError(
+                        f"--demos-file {path}: {name} has shape {array.shape}; expected {ndim} dimensions"
+                    )
+                array = np.asarray(array, dtype=np.float32)
+                if not np.all(np.isfinite(array)):
+                    bad = int(np.count_nonzero(~np.isfinite(array)))
+                    raise DemonstrationError(
+                        f"--demos-file {path}: {name} holds {bad} non-finite values (NaN or inf); only finite "
+                        "values are allowed"
+                    )
+                return array
+        raise DemonstrationError(
+            f"--demos-file {path} has no array named {' or '.join(names)} (it has {sorted(arrays)})"
+        )
 
-    obs, ag, actions = pick("obs", "observation"), pick("achieved_goal"), pick("actions", "action")
-    goal = pick("desired_goal")
+    obs, ag = pick("obs", "observation", ndim=3), pick("achieved_goal", ndim=3)
+    actions = pick("actions", "action", ndim=3)
+    goal_array = arrays.get("desired_goal")
+    goal = pick("desired_goal", ndim=2 if goal_array is not None and goal_array.ndim == 2 else 3)
     n, T = actions.shape[:2]
+    if n == 0 or T == 0:
+        raise DemonstrationError(
+            f"--demos-file {path}: actions has shape {actions.shape}; at least one step of one episode"
+        )
     if obs.shape[:2] != (n, T + 1) or ag.shape[:2] != (n, T + 1):
-        raise DemonstrationError(f"{path}: obs and achieved_goal must be (N, T + 1, dim) with T = {T} actions")
+        raise DemonstrationError(
+            f"--demos-file {path}: obs and achieved_goal must be (N, T + 1, dim) = ({n}, {T + 1}, dim) with "
+            f"actions {actions.shape}; they are {obs.shape} and {ag.shape}"
+        )
+    if goal.shape[0] != n or (goal.ndim == 3 and goal.shape[1] not in (T, T + 1)):
+        raise DemonstrationError(
+            f"--demos-file {path}: desired_goal has shape {goal.shape}; "
+            f"expected ({n}, {T} or {T + 1}, dim) or ({n}, dim)"
+        )
+    if float(np.max(np.abs(actions))) > 1.0 + 1e-6:
+        raise DemonstrationError(
+            f"--demos-file {path}: actions must lie in [-1, 1] (largest {np.max(np.abs(actions)):.3g})"
+        )
+    if dims is not None:
+        found = (obs.shape[2], goal.shape[-1], actions.shape[2])
+        for name, want, have in zip(("obs", "desired_goal", "actions"), dims, found, strict=True):
+            if want != have:
+                raise DemonstrationError(f"--demos-file {path}: {name} has {have} values per step; the task has {want}")
+        if ag.shape[2] != dims[1]:
+            raise DemonstrationError(
+                f"--demos-file {path}: achieved_goal has {ag.shape[2]} values; the task has {dims[1]}"
+            )
     if goal.ndim == 2:
         goal = np.repeat(goal[:, None, :], T, axis=1)
     goal = goal[:, :T]
     terminal = np.asarray(arrays.get("terminal", np.zeros((n, T))), dtype=bool)
+    if terminal.shape != (n, T):
+        raise DemonstrationError(f"--demos-file {path}: terminal has shape {terminal.shape}; expected ({n}, {T})")
     take = n if count is None else count
     if take > n:
-        raise DemonstrationError(f"{path} holds {n} demonstrations, {take} were asked for")
+        raise DemonstrationError(f"--demos-file {path} holds {n} demonstrations, {take} were asked for")
     return [Episode(obs[i], ag[i], goal[i], actions[i], terminal[i]) for i in range(take)]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from psm_control.errors import TissueRetractError
 
-__all__ = ["CheckpointError", "DemonstrationError", "ReproductionError", "SpaceMismatchError"]
+__all__ = ["CheckpointError", "DemonstrationError", "ReproductionError", "SpaceMismatchError", "TrainingDivergedError"]
 
 
 class CheckpointError(TissueRetractError):
@@ -46,6 +46,23 @@ class SpaceMismatchError(CheckpointError):
 
 class DemonstrationError(TissueRetractError):
     """Demonstrations could not be obtained or do not fit the task's spaces."""
+
+
+class TrainingDivergedError(TissueRetractError):
+    """A loss or a network weight became non-finite; training stopped before writing it to a checkpoint.
+
+    Attributes:
+        episode: The training episode after which it was found.
+        what: The loss or weight that is not finite.
+    """
+
+    def __init__(self, episode: int, what: str, kept: str) -> None:
+        self.episode = episode
+        self.what = what
+        super().__init__(
+            f"training stopped after episode {episode}: {what} is not finite (NaN or inf); {kept}. Check the "
+            "demonstrations and lower the learning rates (--set actor_lr=..., critic_lr=...)"
+        )
 
 
 class ReproductionError(TissueRetractError):

@@ -33,11 +33,12 @@ def _reset_of(policy: Any) -> Callable[[], None]:
     return reset if callable(reset) else _no_reset
 
 
-def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
+def resolve_policy(spec: str, env: Any, *, allow_other_task: bool = False) -> tuple[Policy, Callable[[], None]]:
     """A policy and its per-episode reset from its name (see the module docstring).
 
     ``module:callable`` names a function of the observation dict, or a class built with the environment
     (``cls(env)``, as :class:`sim.pulling.AggressivePull`); a ``reset()`` method is called per episode.
+    A checkpoint trained for another task is refused unless ``allow_other_task``.
 
     Raises:
         ConfigurationError: The policy cannot be found.
@@ -54,10 +55,23 @@ def resolve_policy(spec: str, env: Any) -> tuple[Policy, Callable[[], None]]:
         module_name, _, attribute = spec.partition(":")
         try:
             target = getattr(importlib.import_module(module_name), attribute)
-        except (ImportError, AttributeError) as e:
-            raise ConfigurationError("policy", spec, "an importable module:callable") from e
+        except KeyboardInterrupt:
+            raise
+        except BaseException as e:
+            raise ConfigurationError(
+                "--policy", spec, f"an importable module:callable ({type(e).__name__}: {e})"
+            ) from e
         if isinstance(target, type):  # a policy class is built with the environment, as ScriptedExpert(env)
-            target = target(env)
+            try:
+                target = target(env)
+            except KeyboardInterrupt:
+                raise
+            except BaseException as e:
+                raise ConfigurationError(
+                    "--policy", spec, f"a class built as cls(env) ({type(e).__name__}: {e})"
+                ) from e
+        if not callable(target):
+            raise ConfigurationError("--policy", spec, "a callable taking the observation dict")
         return target, _reset_of(target)
-    policy = load_policy(spec, env)
+    policy = load_policy(spec, env, allow_other_task=allow_other_task)
     return policy, _reset_of(policy)

@@ -36,7 +36,7 @@ from policies.checkpoint import (
 )
 from policies.config import TrainConfig
 from policies.demos import collect_demos, expert_for, load_demos, rollout
-from policies.errors import CheckpointError
+from policies.errors import CheckpointError, TrainingDivergedError
 from psm_control.errors import ConfigurationError, UnknownVariantError
 
 __all__ = ["POLICY_FILE", "RESUME_FILE", "RunSpec", "TrainResult", "ensure_registered", "evaluate", "train"]
@@ -154,11 +154,11 @@ def evaluate(agent: Agent, env: gym.Env[Any, Any], episodes: int) -> float:
     return successes / episodes
 
 
-def _demonstrations(spec: RunSpec, env: gym.Env[Any, Any]) -> list[Episode]:
+def _demonstrations(spec: RunSpec, env: gym.Env[Any, Any], dims: Dims) -> list[Episode]:
     if spec.demos == 0:
         return []
     if spec.demos_file is not None:
-        return load_demos(spec.demos_file, spec.demos)
+        return load_demos(spec.demos_file, spec.demos, dims=(dims.obs, dims.goal, dims.action))
     return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=_DEMO_SEED + 1000 * spec.seed)
 
 
@@ -224,7 +224,7 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
     resume_path, policy_path = out / RESUME_FILE, out / POLICY_FILE
 
     buffer = EpisodeBuffer(config.buffer_size, horizon, dims.obs, dims.goal, dims.action)
-    demos = _demonstrations(spec, env) if config.uses_demos else []
+    demos = _demonstrations(spec, env, dims) if config.uses_demos else []
     demo_buffer = None
     if demos:
         demo_buffer = EpisodeBuffer(len(demos) * horizon, horizon, dims.obs, dims.goal, dims.action)
@@ -286,6 +286,7 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
             learning = env_steps >= config.random_steps
             if learning:
                 metrics = agent.train(buffer, demo_buffer, reward_fn, config.updates_per_episode)
+                _check_finite(agent, metrics, episode_index + 1, policy_path)
             t2 = time.perf_counter()
             if learning:
                 result.learning_steps += len(episode.action)
@@ -312,6 +313,22 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
             bar.close()
         logger.close()
     return result
+
+
+def _check_finite(agent: Agent, metrics: dict[str, float], episode: int, policy_path: Path) -> None:
+    """Stop before a non-finite loss or weight reaches a checkpoint: the last good one stays as it is."""
+    bad = next((f"loss {k}={v}" for k, v in metrics.items() if not np.isfinite(v)), None)
+    if bad is None:
+        for name, module in agent.modules().items():
+            for key, value in module.state_dict().items():
+                if value.is_floating_point() and not bool(torch.isfinite(value).all()):
+                    bad = f"weight {name}.{key}"
+                    break
+            if bad is not None:
+                break
+    if bad is not None:
+        kept = f"the last good policy is kept in {policy_path}" if policy_path.exists() else "no checkpoint was written"
+        raise TrainingDivergedError(episode, bad, kept)
 
 
 def _prefixed(prefix: str, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -12,6 +12,7 @@ from collections.abc import Iterable
 __all__ = [
     "ConfigurationError",
     "InfeasibleProblemError",
+    "InputFileError",
     "JointLimitError",
     "JointVectorError",
     "NotBuiltError",
@@ -39,6 +40,18 @@ class ConfigurationError(TissueRetractError, ValueError):
         self.value = value
         self.allowed = allowed
         super().__init__(f"{field}={value!r} is not allowed: expected {allowed}")
+
+
+class InputFileError(ConfigurationError):
+    """A file the user named cannot be used: missing, not a regular file, too large, not UTF-8, malformed.
+
+    Attributes:
+        path: The file, as given.
+    """
+
+    def __init__(self, field: str, path: object, allowed: str) -> None:
+        self.path = str(path)
+        super().__init__(field, self.path, allowed)
 
 
 class UnknownVariantError(ConfigurationError):

@@ -18,9 +18,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from psm_control.errors import ConfigurationError, UnknownVariantError
+from psm_control.inputs import load_yaml, read_text
 from psm_control.spec import PsmSpec, psm_spec
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "FORCE_PRESETS",
     "MAX_CONTROL_RATE_HZ",
     "MIN_CONTROL_RATE_HZ",
+    "MIN_FORCE_LIMIT_N",
     "ForcePreset",
     "SafetyConfig",
     "load_safety_config",
@@ -67,16 +68,37 @@ MAX_CONTROL_RATE_HZ = 5000.0
 DEADMAN_MIN_PERIODS = 2
 
 
-def _positive(name: str, value: float, upper: float = math.inf) -> None:
-    if not (isinstance(value, int | float) and math.isfinite(value) and 0.0 < value <= upper):
-        raise ConfigurationError(name, value, f"a finite number in (0, {upper:g}]")
+#: Lowest retraction-force limit [N]: below it the dVRK's body/measured_cf estimate (from motor currents)
+#: cannot tell a pull from noise; the most delicate preset (nerve) is 0.4 N.
+MIN_FORCE_LIMIT_N = 0.1
+#: Plausible joint-limit settings as multiples of the dVRK's move_jp limits of each joint: from
+#: ``low`` (slower than this never reaches a target) to ``high`` (faster than any arm can servo).
+_RATE_FACTORS: dict[str, tuple[float, float]] = {
+    "velocity_limit": (1e-3, 10.0),
+    "acceleration_limit": (1e-3, 100.0),
+    "jerk_limit": (1e-3, 1e5),
+}
+
+
+def _is_number(value: object) -> bool:
+    """A real number: an int or a float, never a bool (``true`` is not 1 N) or a string."""
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _positive(name: str, value: float, upper: float = math.inf, lower: float = 0.0) -> None:
+    """Refuse anything but a finite number in (0, upper], or in [lower, upper] when ``lower`` > 0."""
+    inside = _is_number(value) and math.isfinite(value) and value <= upper
+    inside = inside and (value >= lower if lower > 0.0 else value > 0.0)
+    if not inside:
+        interval = f"[{lower:g}, {upper:g}]" if lower > 0.0 else f"(0, {upper:g}]"
+        raise ConfigurationError(name, value, f"a finite number in {interval}")
 
 
 def _vector(name: str, value: object, length: int, *, positive: bool = False) -> None:
-    array = np.asarray(value, dtype=float) if not isinstance(value, str) else np.array([np.nan])
-    if array.shape != (length,) or not np.all(np.isfinite(array)):
-        raise ConfigurationError(name, value, f"{length} finite numbers")
-    if positive and not np.all(array > 0.0):
+    items = list(value) if isinstance(value, list | tuple) else None
+    if items is None or len(items) != length or not all(_is_number(v) and math.isfinite(v) for v in items):
+        raise ConfigurationError(name, value, f"a list of {length} finite numbers")
+    if positive and not all(v > 0.0 for v in items):
         raise ConfigurationError(name, value, f"{length} numbers > 0")
 
 
@@ -168,6 +190,12 @@ class SafetyConfig:
     _spec: PsmSpec = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.arm, str):
+            raise ConfigurationError("arm", self.arm, "a string: 'classic' or 'si'")
+        if self.tool is not None and not isinstance(self.tool, str):
+            raise ConfigurationError("tool", self.tool, "a part number as a string, or none")
+        if not isinstance(self.tissue, str):
+            raise ConfigurationError("tissue", self.tissue, "one of " + ", ".join(repr(t) for t in FORCE_PRESETS))
         object.__setattr__(self, "_spec", psm_spec(self.arm, self.tool))
         self.validate()
 
@@ -221,8 +249,7 @@ class SafetyConfig:
         """Raise :class:`ConfigurationError` naming the first field outside its allowed range."""
         dof = self._spec.dof
         if not (
-            isinstance(self.control_rate_hz, int | float)
-            and MIN_CONTROL_RATE_HZ <= self.control_rate_hz <= MAX_CONTROL_RATE_HZ
+            _is_number(self.control_rate_hz) and MIN_CONTROL_RATE_HZ <= self.control_rate_hz <= MAX_CONTROL_RATE_HZ
         ):
             raise ConfigurationError(
                 "control_rate_hz",
@@ -238,6 +265,16 @@ class SafetyConfig:
             value = getattr(self, name)
             if value is not None:
                 _vector(name, value, dof, positive=True)
+                reference = self._spec.velocity_limit if name == "velocity_limit" else self._spec.acceleration_limit
+                low, high = _RATE_FACTORS[name]
+                array = np.asarray(value, dtype=float)
+                if np.any(array < low * reference) or np.any(array > high * reference):
+                    raise ConfigurationError(
+                        name,
+                        value,
+                        f"per joint between {low:g} and {high:g} times the dVRK's move_jp limits: "
+                        f"{np.round(low * reference, 6).tolist()} to {np.round(high * reference, 3).tolist()}",
+                    )
         _positive("jerk_per_acceleration", self.jerk_per_acceleration, 1e4)
         _vector("position_margin", self.position_margin, dof)
         margin = np.asarray(self.position_margin)
@@ -245,7 +282,7 @@ class SafetyConfig:
         if np.any(margin < 0.0) or np.any(2 * margin >= span):
             raise ConfigurationError("position_margin", self.position_margin, f">= 0 and below half of {span.round(3)}")
         upper_insertion = self._spec.joints[2].upper
-        if not (_DVRK_MIN_INSERTION_M <= self.min_insertion_m < upper_insertion):
+        if not (_is_number(self.min_insertion_m) and _DVRK_MIN_INSERTION_M <= self.min_insertion_m < upper_insertion):
             raise ConfigurationError(
                 "min_insertion_m", self.min_insertion_m, f"[{_DVRK_MIN_INSERTION_M}, {upper_insertion})"
             )
@@ -260,16 +297,17 @@ class SafetyConfig:
         if self.tissue not in FORCE_PRESETS:
             raise UnknownVariantError("tissue", self.tissue, FORCE_PRESETS)
         if self.force_limit_n is not None:
-            _positive("force_limit_n", self.force_limit_n, 50.0)
-        _positive("stiffness_min_n_per_m", self.stiffness_min_n_per_m, 1e5)
-        _positive("stiffness_max_n_per_m", self.stiffness_max_n_per_m, 1e5)
+            _positive("force_limit_n", self.force_limit_n, 50.0, lower=MIN_FORCE_LIMIT_N)
+        _positive("stiffness_min_n_per_m", self.stiffness_min_n_per_m, 1e5, lower=1.0)
+        _positive("stiffness_max_n_per_m", self.stiffness_max_n_per_m, 1e5, lower=1.0)
+        _positive("stiffness_prior_n_per_m", self.stiffness_prior_n_per_m, 1e5, lower=1.0)
         if not self.stiffness_min_n_per_m <= self.stiffness_prior_n_per_m <= self.stiffness_max_n_per_m:
             raise ConfigurationError(
                 "stiffness_prior_n_per_m",
                 self.stiffness_prior_n_per_m,
                 f"[{self.stiffness_min_n_per_m}, {self.stiffness_max_n_per_m}] (stiffness_min/max_n_per_m)",
             )
-        if not (isinstance(self.stiffness_forgetting, int | float) and 0.5 < self.stiffness_forgetting <= 1.0):
+        if not (_is_number(self.stiffness_forgetting) and 0.5 < self.stiffness_forgetting <= 1.0):
             raise ConfigurationError("stiffness_forgetting", self.stiffness_forgetting, "a number in (0.5, 1]")
         if not (isinstance(self.force_reserve, int | float) and 0.0 <= self.force_reserve <= 0.5):
             raise ConfigurationError("force_reserve", self.force_reserve, "a fraction in [0, 0.5]")
@@ -285,7 +323,11 @@ class SafetyConfig:
         _positive("max_translation_m", self.max_translation_m, 0.2)
         _positive("max_yaw_rad", self.max_yaw_rad, math.pi)
         _positive("solver_eps", self.solver_eps, 1e-3)
-        if not (isinstance(self.solver_max_iter, int) and 10 <= self.solver_max_iter <= 100_000):
+        if not (
+            isinstance(self.solver_max_iter, int)
+            and not isinstance(self.solver_max_iter, bool)
+            and 10 <= self.solver_max_iter <= 100_000
+        ):
             raise ConfigurationError("solver_max_iter", self.solver_max_iter, "an integer in [10, 100000]")
         _positive("hard_tolerance", self.hard_tolerance, 1e-3)
         _positive("slack_penalty", self.slack_penalty, 1e9)
@@ -314,25 +356,19 @@ def load_safety_config(path: str | Path) -> SafetyConfig:
         ConfigurationError: Unknown key, unreadable file or a value outside its allowed range.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise ConfigurationError("config", str(path), "a readable file") from e
     suffix = path.suffix.lower()
+    if suffix not in (".toml", ".yaml", ".yml"):
+        raise ConfigurationError("--safety-config", str(path), "a .toml, .yaml or .yml file")
+    text = read_text(path, "--safety-config")
     if suffix == ".toml":
         try:
-            data: Any = tomllib.loads(text)
+            data: Any = tomllib.loads(text)  # refuses duplicate keys itself
         except tomllib.TOMLDecodeError as e:
-            raise ConfigurationError("config", str(path), f"valid TOML ({e})") from e
-    elif suffix in (".yaml", ".yml"):
-        try:
-            data = yaml.safe_load(text) or {}
-        except yaml.YAMLError as e:
-            raise ConfigurationError("config", str(path), f"valid YAML ({e})") from e
+            raise ConfigurationError("--safety-config", str(path), f"valid TOML without duplicate keys ({e})") from e
     else:
-        raise ConfigurationError("config", str(path), "a .toml, .yaml or .yml file")
+        data = load_yaml(text, "--safety-config", path) or {}
     if not isinstance(data, dict):
-        raise ConfigurationError("config", str(path), "a mapping of settings")
+        raise ConfigurationError("--safety-config", str(path), "a mapping of settings")
     if "safety" in data and isinstance(data["safety"], dict):
         data = data["safety"]
     return SafetyConfig.from_mapping(data)

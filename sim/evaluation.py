@@ -17,6 +17,7 @@ includes those tick readings.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -24,9 +25,18 @@ from typing import Any
 
 import numpy as np
 
-from psm_control.errors import ConfigurationError
+from psm_control.errors import ConfigurationError, TissueRetractError
 
-__all__ = ["FAILURE_CLASSES", "EpisodeResult", "Policy", "force_limit_summary", "run_episode", "summarize"]
+__all__ = [
+    "FAILURE_CLASSES",
+    "EpisodeResult",
+    "Policy",
+    "PolicyError",
+    "check_start_inside_workspace",
+    "force_limit_summary",
+    "run_episode",
+    "summarize",
+]
 
 FAILURE_CLASSES = (
     "none", "improper_grasp", "grip_loss", "tissue_damage", "safety_stop", "invalid_action", "timeout", "sim_unstable",
@@ -34,6 +44,32 @@ FAILURE_CLASSES = (
 _SEVERITY = ("sim_unstable", "safety_stop", "invalid_action", "tissue_damage", "grip_loss", "improper_grasp")
 
 Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
+
+
+class PolicyError(TissueRetractError):
+    """The policy raised (anything, ``SystemExit`` included) during an episode: that episode's error.
+
+    Attributes:
+        seed: The episode's seed.
+        step: The step at which the policy failed.
+        cause: What the policy raised, as ``Type: message``.
+    """
+
+    def __init__(self, seed: int, step: int, error: BaseException) -> None:
+        self.seed = seed
+        self.step = step
+        self.cause = f"{type(error).__name__}: {error}"
+        super().__init__(f"the policy raised {self.cause} at step {step} of the episode with seed {seed}")
+
+
+def _call_policy(function: Callable[[], Any], seed: int, step: int) -> Any:
+    """Call a policy (or its reset); whatever it raises but Ctrl-C becomes a :class:`PolicyError`."""
+    try:
+        return function()
+    except KeyboardInterrupt:
+        raise
+    except BaseException as e:
+        raise PolicyError(seed, step, e) from e
 
 
 @dataclass
@@ -70,11 +106,17 @@ class EpisodeResult:
 def run_episode(
     env: Any, policy: Policy, reset: Callable[[], None], seed: int, options: dict[str, Any] | None = None
 ) -> EpisodeResult:
-    """Run one episode to its end and classify it (``options`` go to ``env.reset``)."""
+    """Run one episode to its end and classify it (``options`` go to ``env.reset``).
+
+    Raises:
+        PolicyError: The policy (or its reset) raised; the episode has no result.
+        ConfigurationError: The control chain's workspace box does not contain the task's start pose.
+    """
     model = env.unwrapped.model
     minimum_insertion = model.spec.rcm.min_insertion_m
     observation, info = env.reset(seed=seed, options=options)
-    reset()
+    check_start_inside_workspace(env, float(info["workspace_violation_m"]))
+    _call_policy(reset, seed, 0)
     counts = dict.fromkeys(_SEVERITY, 0)
     peak, steps, violations, stops, interventions = 0.0, 0, 0, 0, 0
     margin = float(info["insertion_m"]) - minimum_insertion
@@ -83,7 +125,8 @@ def run_episode(
     limit = _force_limit(env)
     force_warnings = int(bool(info.get("force_warning")))
     while True:
-        observation, _, terminated, truncated, info = env.step(policy(observation))
+        action = _call_policy(functools.partial(policy, observation), seed, steps)
+        observation, _, terminated, truncated, info = env.step(action)
         steps += 1
         peak = max(peak, float(info["force_norm_n"]))
         for event in _SEVERITY:
@@ -133,6 +176,20 @@ def run_episode(
 def _force_limit(env: Any) -> float:
     config = getattr(getattr(env.unwrapped, "controller", None), "config", None)
     return float(config.effective_force_limit_n) if config is not None else float("nan")
+
+
+def check_start_inside_workspace(env: Any, outside_m: float) -> None:
+    """Refuse a workspace box that excludes the tool tip's start pose: every command would be refused."""
+    controller = getattr(env.unwrapped, "controller", None)
+    config = getattr(controller, "config", None)
+    if config is None or outside_m <= config.workspace_tolerance_m:
+        return
+    raise ConfigurationError(
+        "workspace_min_m/workspace_max_m",
+        f"{list(config.workspace_min_m)}/{list(config.workspace_max_m)}",
+        f"a box containing the task's start tool-tip position (it lies {1000 * outside_m:.1f} mm outside; "
+        "the default box is (-0.07, -0.07, -0.20) to (0.07, 0.07, -0.05) m about the RCM)",
+    )
 
 
 def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, Any]:

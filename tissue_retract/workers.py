@@ -7,6 +7,7 @@ outcome. They live here, above ``sim`` and ``policies``, because they compose bo
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from typing import Any
 
@@ -14,11 +15,11 @@ from policies.resolve import resolve_policy
 from safety.config import SafetyConfig
 from sim.disturbances import DisturbanceWrapper
 from sim.envs import make
-from sim.evaluation import run_episode
+from sim.evaluation import check_start_inside_workspace, run_episode
 from sim.robustness import disturbances, episode_options
 from sim.tuning import integer_settings
 
-__all__ = ["ROBUSTNESS_WORKER", "TUNING_WORKER", "robustness_episode", "tuning_episode"]
+__all__ = ["ROBUSTNESS_WORKER", "TUNING_WORKER", "check_sweep_policy", "robustness_episode", "tuning_episode"]
 
 #: The names :func:`sim.sweep.run_trials` takes for the workers below.
 ROBUSTNESS_WORKER = f"{__name__}:robustness_episode"
@@ -28,15 +29,32 @@ _CACHE: dict[tuple[Any, ...], Any] = {}
 
 
 def _environment(task: str, safety: bool, safety_config: Mapping[str, Any] | None) -> Any:
-    key = ("env", task, safety, tuple(sorted((safety_config or {}).items())))
+    key = ("env", task, safety, json.dumps(dict(safety_config or {}), sort_keys=True))
     if key not in _CACHE:
         kwargs: dict[str, Any] = {"safety": safety}
         if safety_config:
-            kwargs["safety_config"] = SafetyConfig(**dict(safety_config))
+            kwargs["safety_config"] = SafetyConfig.from_mapping(safety_config)
         for old in [k for k in _CACHE if k[0] == "env"]:
             _CACHE.pop(old).close()  # one environment (one physics client) per worker process
         _CACHE[key] = make(task, **kwargs)
     return _CACHE[key]
+
+
+def check_sweep_policy(
+    policy: str, task: str, safety_config: Mapping[str, Any] | None, *, allow_other_task: bool = False
+) -> None:
+    """Before a sweep starts: the policy loads for the task and the start pose lies inside the workspace box.
+
+    Raises:
+        ConfigurationError: The policy cannot be found or the workspace excludes the start pose.
+        CheckpointError: The checkpoint is invalid or was trained for another task.
+    """
+    env = _environment(task, True, safety_config)
+    resolve_policy(policy, env, allow_other_task=allow_other_task)
+    _, info = env.reset(seed=0)
+    check_start_inside_workspace(env, float(info["workspace_violation_m"]))
+    for key in [k for k in _CACHE if k[0] == "env"]:
+        _CACHE.pop(key).close()
 
 
 def robustness_episode(
@@ -47,6 +65,7 @@ def robustness_episode(
     relative: Mapping[str, bool],
     safety: bool = True,
     safety_config: Mapping[str, Any] | None = None,
+    allow_other_task: bool = False,
 ) -> dict[str, Any]:
     """Run one trial of a sweep and return its outcome.
 
@@ -57,12 +76,13 @@ def robustness_episode(
         relative: Which parameters are multipliers of their nominal value.
         safety: Run the safety filter (False only for ablations).
         safety_config: Keyword overrides of :class:`safety.config.SafetyConfig` for this sweep.
+        allow_other_task: Run a checkpoint trained for another task (with the same spaces).
     """
     params = {str(k): float(v) for k, v in trial["params"].items()}
     env = _environment(task, safety, safety_config)
     policy_key = ("policy", policy, id(env))
     if policy_key not in _CACHE:
-        _CACHE[policy_key] = resolve_policy(policy, env)
+        _CACHE[policy_key] = resolve_policy(policy, env, allow_other_task=allow_other_task)
     policy_fn, policy_reset = _CACHE[policy_key]
     observation_disturbances, action_disturbances = disturbances(params)
     wrapped = DisturbanceWrapper(env, observation=observation_disturbances, action=action_disturbances)
@@ -76,8 +96,20 @@ def robustness_episode(
 
 
 def tuning_episode(
-    trial: Mapping[str, Any], *, policy: str, task: str, base_config: Mapping[str, Any] | None = None
+    trial: Mapping[str, Any],
+    *,
+    policy: str,
+    task: str,
+    base_config: Mapping[str, Any] | None = None,
+    allow_other_task: bool = False,
 ) -> dict[str, Any]:
     """One episode of the policy under the trial's safety settings."""
     overrides = {**dict(base_config or {}), **integer_settings(trial["params"])}
-    return robustness_episode({**trial, "params": {}}, policy=policy, task=task, relative={}, safety_config=overrides)
+    return robustness_episode(
+        {**trial, "params": {}},
+        policy=policy,
+        task=task,
+        relative={},
+        safety_config=overrides,
+        allow_other_task=allow_other_task,
+    )

@@ -6,7 +6,8 @@ as soon as it arrives, so an interrupted sweep resumes where it stopped and a cr
 are retried rather than lost. Robustness evaluation and safety tuning are built on it.
 """
 
-from sim.sweep.executor import BACKENDS, run_trials
+from sim.sweep.executor import BACKENDS, cap_jobs, run_trials
+from sim.sweep.identity import SweepIdentityError, file_digest, prepare_output
 from sim.sweep.space import ParameterRange, Trial, make_trials, parse_ranges
 from sim.sweep.stats import binned_success, wilson_interval
 from sim.sweep.store import EpisodeStore
@@ -15,10 +16,14 @@ __all__ = [
     "BACKENDS",
     "EpisodeStore",
     "ParameterRange",
+    "SweepIdentityError",
     "Trial",
     "binned_success",
+    "cap_jobs",
+    "file_digest",
     "make_trials",
     "parse_ranges",
+    "prepare_output",
     "run_trials",
     "wilson_interval",
 ]

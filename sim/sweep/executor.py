@@ -9,7 +9,10 @@ worker process serves many trials. Results are stored the moment they arrive.
 from __future__ import annotations
 
 import importlib
+import multiprocessing
 import os
+import sys
+import threading
 import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -24,7 +27,7 @@ from sim.sweep.cluster import ray_cluster
 from sim.sweep.space import Trial
 from sim.sweep.store import EpisodeStore
 
-__all__ = ["BACKENDS", "call_worker", "run_trials"]
+__all__ = ["BACKENDS", "call_worker", "cap_jobs", "run_trials"]
 
 #: Execution backends.
 BACKENDS = ("local", "ray")
@@ -44,9 +47,44 @@ def call_worker(worker: str, trial: dict[str, Any], kwargs: dict[str, Any]) -> d
     """Run one trial in the current process; an exception becomes an error record, not a lost trial."""
     try:
         outcome = _resolve(worker)(trial, **kwargs)
-    except Exception as e:  # a trial's own failure is a result to record, never a reason to stop the sweep
+    except KeyboardInterrupt:
+        raise
+    except BaseException as e:
         return {**trial, "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=5)}
     return {**trial, **outcome}
+
+
+def _end_with_parent() -> None:
+    """Pool initializer: end this worker as soon as the sweep's process is gone (even after a SIGKILL).
+
+    A spawned process holds a sentinel that becomes ready when its parent dies; a daemon thread waits on
+    it, so no orphaned worker (and, with them gone, no orphaned resource tracker) keeps running.
+    """
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        parent.join()
+        os._exit(1)
+
+    threading.Thread(target=watch, name="end-with-parent", daemon=True).start()
+
+
+def cap_jobs(jobs: int | None) -> int:
+    """Worker processes for ``--jobs``: at most the machine's cores (more only compete for them).
+
+    Raises:
+        ConfigurationError: ``jobs`` below 1.
+    """
+    cores = os.cpu_count() or 1
+    if jobs is None:
+        return cores
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ConfigurationError("jobs", jobs, f"an integer from 1 to the {cores} cores")
+    if jobs > cores:
+        print(f"--jobs {jobs} capped to this machine's {cores} cores", file=sys.stderr)
+    return min(jobs, cores)
 
 
 def _crash_record(trial: Trial, attempts: int) -> dict[str, Any]:
@@ -67,7 +105,9 @@ def _run_local(
     while queue:
         # A pool breaks as a whole when one of its processes dies; the trials it was running are
         # charged one attempt each and the pool is rebuilt for whatever is left.
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
+        with ProcessPoolExecutor(
+            max_workers=min(jobs, len(queue)), mp_context=get_context("spawn"), initializer=_end_with_parent
+        ) as pool:
             running: dict[Future[dict[str, Any]], Trial] = {}
             broken = False
             while (queue or running) and not broken:
@@ -148,7 +188,7 @@ def run_trials(
         worker: ``"module:function"`` run once per trial in a worker process.
         store: Where results go; trials already in it are skipped (resumption).
         backend: ``"local"`` (a process pool) or ``"ray"`` (``RAY_ADDRESS`` or a local cluster).
-        jobs: Worker processes (default: all cores).
+        jobs: Worker processes (default and at most: all cores).
         worker_kwargs: Keyword arguments for the worker (must pickle).
         max_attempts: Tries per trial when its worker process dies; after that it is recorded as an error.
         show_progress: Show a progress bar.
@@ -159,9 +199,7 @@ def run_trials(
     """
     if backend not in BACKENDS:
         raise UnknownVariantError("backend", backend, BACKENDS)
-    jobs = jobs or os.cpu_count() or 1
-    if jobs < 1:
-        raise ConfigurationError("jobs", jobs, "an integer >= 1")
+    jobs = cap_jobs(jobs)
     if max_attempts < 1:
         raise ConfigurationError("max_attempts", max_attempts, "an integer >= 1")
     _resolve(worker)  # fail fast, before any process starts

@@ -104,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     except TissueRetractError as e:
         print(f"tissue-retract {args.command}: error: {e}", file=sys.stderr)
         return 1
+    except OSError as e:  # a file the user named could not be read or written (disk full, permissions)
+        print(f"tissue-retract {args.command}: error: {e.strerror or e}: {e.filename or ''}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"tissue-retract {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -11,6 +11,7 @@ import numpy as np
 
 from psm_control import __version__
 from psm_control.errors import ConfigurationError
+from psm_control.inputs import check_output_path
 from sim.envs import gym_id, make
 from sim.expert import ScriptedExpert
 
@@ -21,6 +22,12 @@ def run_episodes(args: argparse.Namespace) -> int:
     """Run the expert, print one line per episode, and write demos and a video if asked."""
     if args.episodes < 1:
         raise ConfigurationError("--episodes", args.episodes, "a positive number of episodes")
+    if args.out:
+        check_output_path(args.out, "--out")
+    if args.video:
+        if not args.video.endswith((".gif", ".mp4")):
+            raise ConfigurationError("--video", args.video, "a .gif or .mp4 file")
+        check_output_path(args.video, "--video", (args.out,))
     env = make(args.task)
     expert = ScriptedExpert(env)
     kept: list[dict[str, Any]] = []

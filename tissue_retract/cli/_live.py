@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from tissue_retract.cli._checks import int_in
+
 __all__ = ["DEFAULT_LIVE_PORT", "add_live_argument"]
 
 #: Foxglove's default WebSocket port.
@@ -14,7 +16,7 @@ def add_live_argument(parser: argparse.ArgumentParser) -> None:
     """``--live [PORT]``: serve the 3-D scene for the Foxglove app on ws://127.0.0.1:PORT."""
     parser.add_argument(
         "--live",
-        type=int,
+        type=int_in(0, 65535),
         nargs="?",
         const=DEFAULT_LIVE_PORT,
         default=None,

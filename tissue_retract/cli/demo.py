@@ -26,6 +26,7 @@ from psm_control.robot import PsmModel
 from psm_control.spec import ARMS, TOOLS
 from psm_control.urdf import TOOL_TIP_FRAME
 from sim.psm_body import PsmBody
+from tissue_retract.cli._checks import MAX_EPISODES, int_in
 from tissue_retract.cli._demos import run_episodes
 
 __all__ = ["add_arguments", "run"]
@@ -37,8 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--arm", choices=ARMS, default="classic", help="PSM generation (default: classic)")
     parser.add_argument("--tool", choices=TOOLS, default=None, help="instrument (default: the arm's LND)")
     parser.add_argument("--task", default="multisite", help="lift, target, multisite, expose (default: multisite)")
-    parser.add_argument("--episodes", type=int, default=1, help="episodes to run (default: 1)")
-    parser.add_argument("--seed", type=int, default=0, help="first episode seed (default: 0)")
+    parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=1, help="episodes to run (default: 1)")
+    parser.add_argument(
+        "--seed", type=int_in(0, 2**31 - 1 - MAX_EPISODES), default=0, help="first episode seed (default: 0)"
+    )
     parser.add_argument("--out", metavar="FILE", default=None, help="write successful episodes as .npz demos")
     parser.add_argument("--video", metavar="FILE", default=None, help="record the first episode (.gif or .mp4)")
 

@@ -40,7 +40,9 @@ from pathlib import Path
 from hardware_if.deploy import DeployOptions, deploy
 from hardware_if.network import apply_local_ros_env, environment_domain_id
 from psm_control.errors import ConfigurationError
-from safety.config import load_safety_config
+from psm_control.inputs import check_output_path
+from safety.config import MAX_CONTROL_RATE_HZ, MIN_CONTROL_RATE_HZ, load_safety_config
+from tissue_retract.cli._checks import MAX_EPISODES, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
@@ -53,26 +55,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--task", default="lift", help="task id: lift, target, multisite, expose (default: lift)")
     parser.add_argument("--arm", default="PSM1", help="arm name / topic namespace (default: PSM1)")
     parser.add_argument(
-        "--rate", type=float, default=None, help="control rate [Hz] (default: 100 on the dVRK, the simulation's in sim)"
+        "--rate",
+        type=float_in(MIN_CONTROL_RATE_HZ, MAX_CONTROL_RATE_HZ),
+        default=None,
+        help=f"control rate [Hz], {MIN_CONTROL_RATE_HZ:g}-{MAX_CONTROL_RATE_HZ:g} (default: 100 on the dVRK, the "
+        "simulation's in sim)",
     )
     parser.add_argument("--dry-run", action="store_true", help="compute and record, publish nothing on motion topics")
     parser.add_argument("--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml)")
     parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
     add_live_argument(parser)
-    parser.add_argument("--episodes", type=int, default=1, help="episodes (default: 1)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
+    parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=1, help="episodes (default: 1)")
     parser.add_argument(
-        "--wait", type=float, default=30.0, help="seconds to wait for the arm (ENABLED, homed) and the task topics"
+        "--seed", type=int_in(0, 2**31 - 1 - MAX_EPISODES), default=0, help="seed of the first episode (default: 0)"
+    )
+    parser.add_argument(
+        "--wait",
+        type=float_in(0.0, 3600.0, open_low=True),
+        default=30.0,
+        help="seconds to wait for the arm (ENABLED, homed) and the task topics",
     )
     parser.add_argument(
         "--policy-budget",
-        type=float,
+        type=float_in(0.0, 3600.0, open_low=True),
         default=None,
         metavar="SECONDS",
         help="longest a policy step may take before the arm is held (default: one policy period)",
     )
     parser.add_argument(
-        "--domain-id", type=int, default=environment_domain_id(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
+        "--domain-id",
+        type=int_in(0, 232),
+        default=environment_domain_id(),
+        help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID or 0)",
     )
     parser.add_argument(
         "--network",
@@ -95,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
     if args.safety_config is not None:
         safety_config = load_safety_config(args.safety_config)
     record = Path(args.record) if args.record else Path("runs") / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+    check_output_path(record, "--record", (args.policy, args.safety_config))
     options = DeployOptions(
         policy=args.policy,
         target=args.target,

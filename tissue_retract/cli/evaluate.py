@@ -11,16 +11,22 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
 
 from rich.console import Console
 from rich.table import Table
 
 import sim.envs
 from policies.resolve import resolve_policy
-from psm_control.errors import ConfigurationError
+from psm_control.inputs import check_output_path
 from safety.config import load_safety_config
-from sim.evaluation import run_episode, summarize, timed
+from sim.evaluation import EpisodeResult, PolicyError, run_episode, summarize, timed
 from sim.scene_stream import LiveScene, StreamScene
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, int_in
 from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
@@ -30,20 +36,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
     parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
     parser.add_argument("--task", default="multisite", help="lift, target, multisite, expose (or 1-3, a Gym id)")
-    parser.add_argument("--episodes", type=int, default=50, help="episodes per seed (default: 50)")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="seeds (default: 1 2 3)")
+    parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=50, help="episodes per seed (default: 50)")
+    parser.add_argument(
+        "--seeds", type=int_in(0, MAX_SEED), nargs="+", default=[1, 2, 3], help=f"seeds 0-{MAX_SEED} (default: 1 2 3)"
+    )
     parser.add_argument("--no-safety", action="store_true", help="ablation: run without the safety filter")
     parser.add_argument(
         "--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml), e.g. force_limit_n"
     )
     parser.add_argument("--json", metavar="FILE", default=None, help="write {summary, episodes} as JSON")
     add_live_argument(parser)
+    parser.add_argument(
+        "--allow-other-task", action="store_true", help="run a checkpoint trained for another task (same spaces)"
+    )
+
+
+def write_json(path: Path, data: Any) -> None:
+    """Write JSON atomically: a crash leaves the old file or none, never half a file."""
+    fd, temporary = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as handle:
+            json.dump(data, handle, indent=2)
+        os.replace(temporary, path)
+    finally:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
 
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate and print a table."""
-    if args.episodes < 1:
-        raise ConfigurationError("--episodes", args.episodes, "a positive number of episodes")
+    output = None
+    if args.json:
+        output = check_output_path(args.json, "--json", (args.policy, args.safety_config))
     safety_config = None
     if args.safety_config is not None:
         safety_config = load_safety_config(args.safety_config)
@@ -56,16 +80,37 @@ def run(args: argparse.Namespace) -> int:
         live = LiveScene(port=args.live)
         env = StreamScene(env, [live], realtime=True)
         print(f"live: ws://127.0.0.1:{live.port} (open it in the Foxglove app)", flush=True)
+    results: list[EpisodeResult] = []
+    failure: PolicyError | None = None
     try:
-        policy, reset = resolve_policy(args.policy, env)
+        policy, reset = resolve_policy(args.policy, env, allow_other_task=args.allow_other_task)
         seeds = [s * 100000 + i for s in args.seeds for i in range(args.episodes)]
-        results, elapsed = timed(lambda: [run_episode(env, policy, reset, seed) for seed in seeds])
+
+        def episodes() -> None:
+            nonlocal failure
+            for seed in seeds:
+                try:
+                    results.append(run_episode(env, policy, reset, seed))
+                except PolicyError as e:
+                    failure = e
+                    return
+
+        _, elapsed = timed(episodes)
         controller = env.unwrapped.controller_name
         force_limit_n = env.unwrapped.controller.config.effective_force_limit_n
     finally:
         env.close()
         if live is not None:
             live.close()
+    if failure is not None:
+        if output is not None:
+            write_json(
+                output,
+                {"policy_error": str(failure), "episodes": [r.to_dict() for r in results]},
+            )
+        kept = f"; the {len(results)} episodes before it are in {output}" if output is not None else ""
+        print(f"tissue-retract evaluate: error: policy error: {failure}{kept}", file=sys.stderr)
+        return 1
     summary = summarize(results, elapsed)
     summary.update(
         task=sim.envs.gym_id(args.task),
@@ -102,7 +147,6 @@ def run(args: argparse.Namespace) -> int:
             f"[bold red]force_limit_exceeded[/]: the measured force passed the {force_limit_n:g} N limit "
             f"{summary['force_limit_exceeded']} time(s), by up to {summary['max_force_excess_n']:.3f} N"
         )
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"summary": summary, "episodes": [r.to_dict() for r in results]}, f, indent=2)
+    if output is not None:
+        write_json(output, {"summary": summary, "episodes": [r.to_dict() for r in results]})
     return 0

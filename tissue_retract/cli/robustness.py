@@ -10,18 +10,25 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
 from rich.console import Console
 from rich.table import Table
 
+from psm_control import __version__
+from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig, load_safety_config
 from sim.envs import gym_id
 from sim.robustness import check_relative_ranges, sweep_parameters
-from sim.sweep import EpisodeStore, make_trials, parse_ranges, run_trials
+from sim.sweep import EpisodeStore, cap_jobs, file_digest, make_trials, parse_ranges, prepare_output, run_trials
 from sim.sweep.report import summarize, write_report
-from tissue_retract.workers import ROBUSTNESS_WORKER
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, int_in
+from tissue_retract.workers import ROBUSTNESS_WORKER, check_sweep_policy
+
+#: Files a robustness sweep writes into ``--out`` (besides its plots).
+OUTPUTS = ("episodes.jsonl", "sweep.json", "summary.json", "report.html", "report.md")
 
 __all__ = ["add_arguments", "run"]
 
@@ -30,17 +37,25 @@ def add_sweep_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     """Options every sweep command shares: what to run, where, on how many processes."""
     parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
     parser.add_argument("--task", required=True, help="task id (lift, target, multisite, expose or a Gymnasium id)")
-    parser.add_argument("--seed", type=int, default=0, help="sweep seed (default 0)")
+    parser.add_argument("--seed", type=int_in(0, 2**31 - 1), default=0, help="sweep seed (default 0)")
     parser.add_argument(
         "--backend",
         choices=("local", "ray"),
         default="local",
         help="local process pool (default) or Ray (RAY_ADDRESS or a local cluster)",
     )
-    parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
+    parser.add_argument(
+        "--jobs", type=int_in(1, 4096), default=None, help="worker processes (default and at most: all cores)"
+    )
     parser.add_argument("--out", type=Path, default=None, help=f"output folder (default runs/{name}-TASK)")
     parser.add_argument("--safety-config", type=Path, default=None, help="SafetyConfig TOML/YAML file")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument(
+        "--fresh", action="store_true", help="delete the episodes of an earlier sweep in --out and start over"
+    )
+    parser.add_argument(
+        "--allow-other-task", action="store_true", help="run a checkpoint trained for another task (same spaces)"
+    )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -48,9 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_sweep_arguments(parser, "robustness")
     parser.add_argument(
         "--trials",
-        type=int,
+        type=int_in(1, MAX_EPISODES),
         default=100,
-        help="episodes (random mode) or levels per parameter (grid mode); default 100",
+        help=f"episodes (random mode) or levels per parameter (grid mode); default 100, at most {MAX_EPISODES}",
     )
     parser.add_argument(
         "--vary",
@@ -68,7 +83,24 @@ def safety_overrides(path: Path | None) -> dict[str, object] | None:
         return None
 
     defaults = SafetyConfig().to_dict()
-    return {k: v for k, v in load_safety_config(path).to_dict().items() if v != defaults[k]}
+    # Tuples as lists: the overrides go to JSON (sweep.json) and to the workers as they would be read back.
+    return {
+        k: list(v) if isinstance(v, tuple) else v
+        for k, v in load_safety_config(path).to_dict().items()
+        if v != defaults[k]
+    }
+
+
+def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -> dict[str, object]:
+    """What decides a sweep's episodes, as recorded in ``sweep.json``."""
+    return {
+        "policy": args.policy,
+        "policy_sha256": file_digest(args.policy),
+        "task": task_id,
+        "seed": args.seed,
+        "package_version": __version__,
+        **settings,
+    }
 
 
 def run(args: argparse.Namespace) -> int:
@@ -76,26 +108,46 @@ def run(args: argparse.Namespace) -> int:
     task_id = gym_id(args.task)
     ranges = parse_ranges(args.vary, valid_names=sweep_parameters())
     check_relative_ranges(ranges)
-    trials = make_trials(ranges, args.trials, mode=args.mode, seed=args.seed)
-    out = args.out or Path("runs") / f"robustness-{task_id}"
-    out.mkdir(parents=True, exist_ok=True)
-    store = EpisodeStore(out / "episodes.jsonl")
-    already = len(store.done() & {t.index for t in trials})
+    count = args.trials ** len(ranges) if args.mode == "grid" else args.trials
+    if count > MAX_TRIALS:
+        raise ConfigurationError(
+            "--trials",
+            args.trials,
+            f"at most {MAX_TRIALS} trials in all ({args.trials}^{len(ranges)} = {count} in grid mode)",
+        )
+    jobs = cap_jobs(args.jobs)
     overrides = safety_overrides(args.safety_config)
+    out = args.out or Path("runs") / f"robustness-{task_id}"
+    check_sweep_policy(args.policy, task_id, overrides, allow_other_task=args.allow_other_task)
+    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
+    trials = make_trials(ranges, args.trials, mode=args.mode, seed=args.seed)
     kwargs = {
         "policy": args.policy,
         "task": task_id,
         "relative": {r.name: r.relative for r in ranges},
         "safety": not args.no_safety,
         "safety_config": overrides,
+        "allow_other_task": args.allow_other_task,
     }
+    identity = sweep_identity(
+        args,
+        task_id,
+        vary=[r.describe() for r in ranges],
+        mode=args.mode,
+        episodes=args.trials,
+        safety=not args.no_safety,
+        safety_config=overrides,
+    )
+    prepare_output(out, identity, fresh=args.fresh)
+    store = EpisodeStore(out / "episodes.jsonl")
+    already = len(store.done() & {t.index for t in trials})
     started = time.perf_counter()
     records = run_trials(
         trials,
         ROBUSTNESS_WORKER,
         store=store,
         backend=args.backend,
-        jobs=args.jobs,
+        jobs=jobs,
         worker_kwargs=kwargs,
         show_progress=not args.no_progress,
     )
@@ -110,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
             "mode": args.mode,
             "seed": args.seed,
             "backend": args.backend,
-            "jobs": args.jobs,
+            "jobs": jobs,
             "episodes_run_now": ran,
             "elapsed_s": elapsed,
             "episodes_per_s": ran / elapsed if ran and elapsed > 0 else None,
@@ -152,4 +204,12 @@ def run(args: argparse.Namespace) -> int:
         table.add_row("episodes/s (this run)", f"{summary['episodes_per_s']:.2f}")
     Console(width=110).print(table)
     print(f"report: {out / 'report.html'}")
-    return 0 if summary["errors"] == 0 else 1
+    failed = [r for r in records if "error" in r]
+    if failed:
+        print(
+            f"tissue-retract robustness: error: {len(failed)} of {len(records)} episodes failed; first: "
+            f"{failed[0]['error']} (the others are kept in {out / 'episodes.jsonl'})",
+            file=sys.stderr,
+        )
+        return 1
+    return 0

@@ -16,8 +16,9 @@ import sys
 from pathlib import Path
 
 from policies.config import TrainConfig
-from policies.trainer import RunSpec, ensure_registered, train
+from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
 from psm_control.errors import ConfigurationError
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, int_in
 
 __all__ = ["add_arguments", "parse_overrides", "run"]
 
@@ -32,13 +33,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="Gymnasium id (TissueRetract-Lift-v0, TissueRetract-ToyReach-v0, ...) or a short name (lift, III)",
     )
     parser.add_argument("--algo", choices=ALGOS, default="ddpg", help="algorithm (default: ddpg)")
-    parser.add_argument("--demos", type=int, default=100, help="demonstration episodes (default: 100; unused by ddpg)")
+    parser.add_argument(
+        "--demos",
+        type=int_in(0, MAX_EPISODES),
+        default=100,
+        help="demonstration episodes (default: 100; unused by ddpg)",
+    )
     parser.add_argument("--demos-file", type=Path, default=None, help="read demonstrations from this .npz")
-    parser.add_argument("--seed", type=int, default=1, help="seed (default: 1)")
-    parser.add_argument("--episodes", type=int, default=1000, help="training episodes (default: 1000)")
+    parser.add_argument("--seed", type=int_in(0, MAX_SEED), default=1, help=f"seed 0-{MAX_SEED} (default: 1)")
+    parser.add_argument(
+        "--episodes", type=int_in(1, MAX_EPISODES), default=1000, help="training episodes (default: 1000)"
+    )
     parser.add_argument("--out", type=Path, default=None, help="output directory (default: runs/TASK/ALGO-sSEED)")
-    parser.add_argument("--eval-every", type=int, default=50, help="evaluate and checkpoint every N episodes")
-    parser.add_argument("--eval-episodes", type=int, default=50, help="episodes per evaluation (default: 50)")
+    parser.add_argument(
+        "--eval-every", type=int_in(1, MAX_EPISODES), default=50, help="evaluate and checkpoint every N episodes"
+    )
+    parser.add_argument(
+        "--eval-episodes", type=int_in(1, MAX_EPISODES), default=50, help="episodes per evaluation (default: 50)"
+    )
     parser.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", help="override a TrainConfig field (JSON value)"
     )
@@ -74,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
     config = TrainConfig(algo=args.algo, **overrides)  # type: ignore[arg-type]
     args.task = ensure_registered(args.task)
     out = args.out if args.out is not None else Path("runs") / args.task / f"{args.algo}-s{args.seed}"
+    check_out_folder(out, (POLICY_FILE, RESUME_FILE, "eval.csv"), (args.demos_file,))
     command = shlex.join(["tissue-retract", *sys.argv[1:]]) if sys.argv[1:2] == ["train"] else _rebuild(args)
     spec = RunSpec(
         task_id=args.task,

@@ -18,9 +18,10 @@ from rich.console import Console
 from rich.table import Table
 
 from psm_control import __version__
+from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig
 from sim.envs import gym_id
-from sim.sweep import EpisodeStore, parse_ranges, run_trials
+from sim.sweep import EpisodeStore, cap_jobs, parse_ranges, prepare_output, run_trials
 from sim.sweep.page import Page, percent, percent_interval, quantity, unit_of
 from sim.tuning import (
     SettingResult,
@@ -31,8 +32,12 @@ from sim.tuning import (
     tuning_trials,
     write_config,
 )
-from tissue_retract.cli.robustness import add_sweep_arguments, safety_overrides
-from tissue_retract.workers import TUNING_WORKER
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, float_in, int_in
+from tissue_retract.cli.robustness import add_sweep_arguments, safety_overrides, sweep_identity
+from tissue_retract.workers import TUNING_WORKER, check_sweep_policy
+
+#: Files tune-safety writes into ``--out``.
+OUTPUTS = ("episodes.jsonl", "sweep.json", "summary.json", "settings.md", "pareto.png", "recommended_safety.yaml")
 
 __all__ = ["add_arguments", "run"]
 
@@ -45,11 +50,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         required=True,
         help="comma-separated SETTING=LOW:HIGH (or LOW:HIGHx of the default), e.g. force_limit_n=0.5:3,cbf_gamma=0.2:1",
     )
-    parser.add_argument("--levels", type=int, default=4, help="values per setting (default 4)")
-    parser.add_argument("--episodes", type=int, default=20, help="episodes per setting (default 20)")
+    parser.add_argument("--levels", type=int_in(1, 1000), default=4, help="values per setting, 1-1000 (default 4)")
+    parser.add_argument(
+        "--episodes", type=int_in(1, MAX_EPISODES), default=20, help="episodes per setting (default 20)"
+    )
     parser.add_argument(
         "--max-force-n",
-        type=float,
+        type=float_in(0.0, 50.0, open_low=True),
         default=None,
         help="peak-force bound for the recommendation [N] (default: the default force limit)",
     )
@@ -97,26 +104,50 @@ def run(args: argparse.Namespace) -> int:
     """Run the sweep, write the table, plot and recommended configuration."""
     task_id = gym_id(args.task)
     ranges = parse_ranges(args.grid, valid_names=tunable_fields())
+    count = args.levels ** len(ranges) * args.episodes
+    if count > MAX_TRIALS:
+        raise ConfigurationError(
+            "--grid/--levels/--episodes",
+            f"{len(ranges)} settings x {args.levels} levels x {args.episodes} episodes",
+            f"at most {MAX_TRIALS} episodes in all (levels^settings x episodes = {count})",
+        )
+    jobs = cap_jobs(args.jobs)
     base = safety_overrides(args.safety_config) or {}
     bound = (
         args.max_force_n if args.max_force_n is not None else SafetyConfig.from_mapping(base).effective_force_limit_n
     )
     trials = tuning_trials(ranges, args.levels, args.episodes, seed=args.seed)
     out = args.out or Path("runs") / f"tune-safety-{task_id}"
-    out.mkdir(parents=True, exist_ok=True)
+    check_sweep_policy(args.policy, task_id, base, allow_other_task=args.allow_other_task)
+    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
+    identity = sweep_identity(
+        args,
+        task_id,
+        grid=[r.describe() for r in ranges],
+        levels=args.levels,
+        episodes=args.episodes,
+        safety_config=base,
+    )
+    prepare_output(out, identity, fresh=args.fresh)
     records = run_trials(
         trials,
         TUNING_WORKER,
         store=EpisodeStore(out / "episodes.jsonl"),
         backend=args.backend,
-        jobs=args.jobs,
+        jobs=jobs,
         show_progress=not args.no_progress,
-        worker_kwargs={"policy": args.policy, "task": task_id, "base_config": base},
+        worker_kwargs={
+            "policy": args.policy,
+            "task": task_id,
+            "base_config": base,
+            "allow_other_task": args.allow_other_task,
+        },
     )
     failed = [r for r in records if "error" in r]
     if failed:
         print(
-            f"tune-safety: {len(failed)} of {len(records)} episodes failed; first error: {failed[0]['error']}",
+            f"tissue-retract tune-safety: error: {len(failed)} of {len(records)} episodes failed; first error: "
+            f"{failed[0]['error']} (the others are kept in {out / 'episodes.jsonl'})",
             file=sys.stderr,
         )
         return 1

@@ -1,0 +1,82 @@
+"""Command values checked as they are parsed: each names the option, the value and what is allowed.
+
+argparse reports a refused value as ``error: argument --seeds: ...`` with status 2 before anything runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+from psm_control.errors import ConfigurationError
+
+__all__ = ["MAX_EPISODES", "MAX_SEED", "MAX_TRIALS", "check_out_folder", "float_in", "int_in"]
+
+#: Largest episode seed: environment seeds are ``seed * 100000 + i`` and must stay below 2**32.
+MAX_SEED = 40_000
+#: Most episodes one command runs (a few days of simulation on one core).
+MAX_EPISODES = 100_000
+#: Most trials of one sweep (robustness or tune-safety), grid products included.
+MAX_TRIALS = 100_000
+
+
+def int_in(low: int, high: int) -> Callable[[str], int]:
+    """An argparse type: an integer in ``[low, high]``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not allowed: expected an integer in [{low}, {high}]"
+            ) from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value} is not allowed: expected an integer in [{low}, {high}]")
+        return value
+
+    return parse
+
+
+def float_in(low: float, high: float, *, open_low: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number in ``[low, high]`` (``(low, high]`` with ``open_low``)."""
+    interval = f"{'(' if open_low else '['}{low:g}, {high:g}]"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not allowed: expected a number in {interval}") from None
+        inside = math.isfinite(value) and (value > low if open_low else value >= low) and value <= high
+        if not inside:
+            raise argparse.ArgumentTypeError(f"{text} is not allowed: expected a finite number in {interval}")
+        return value
+
+    return parse
+
+
+def check_out_folder(out: Path, outputs: Iterable[str], inputs: Iterable[str | Path | None]) -> None:
+    """Make an output folder, refusing a file, an unwritable folder, or one where an output replaces an input.
+
+    Raises:
+        ConfigurationError: Naming ``--out`` and what is wrong (the input it would overwrite).
+    """
+    if out.exists() and not out.is_dir():
+        raise ConfigurationError("--out", str(out), "a folder (this is a file)")
+    names = set(outputs)
+    for given in inputs:
+        if given is None or not Path(given).is_file():
+            continue
+        source = Path(given).resolve()
+        if source.parent == out.resolve() and (source.name in names or source.suffix == ".png"):
+            raise ConfigurationError(
+                "--out", str(out), f"a folder whose outputs do not replace the input {str(given)!r}"
+            )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigurationError("--out", str(out), f"a folder that can be created ({e.strerror or e})") from e
+    if not os.access(out, os.W_OK):
+        raise ConfigurationError("--out", str(out), "a writable folder")
