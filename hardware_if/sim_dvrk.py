@@ -19,6 +19,10 @@
   goals are clamped to the jaw's limits; ``hold`` (stop where the set-point is) and ``free``.
 - Like the dVRK, Cartesian goals (``servo_cp``, ``move_cp``) are refused while the shaft is less than
   45 mm past the RCM, and motion commands are ignored with an error unless the arm is ENABLED and homed.
+- The PID tracking-error trip: when a measured joint (or the jaw) is further from its set-point than
+  the dVRK 2.4's tolerance (:data:`~hardware_if.crtk.TRACKING_TOLERANCE`) while the arm is servoed, the
+  console stops, goes to FAULT and says which joint on ``error``; ``enable`` recovers, from where the
+  arm is. (The kinematic arm always tracks; a physics model that lags or is blocked can trip it.)
 - Effort commands (``servo_jf``, ``jaw/servo_jf``, ``body/`` and ``spatial/servo_cf``) are served but not
   rendered: the simulated arm is position-driven (the kinematic arm, and the task scene's arm, which
   PyBullet moves kinematically), as in the dVRK's own KINEMATIC simulation. The console switches to
@@ -53,7 +57,9 @@ from hardware_if.crtk import (
     DEFAULT_ARM,
     DEFAULT_RATE_HZ,
     JAW_JOINT_NAME,
+    JAW_TRACKING_TOLERANCE,
     JOINT_NAMES,
+    TRACKING_TOLERANCE,
     ArmTopics,
     event_qos,
     periodic_qos,
@@ -85,6 +91,7 @@ class SimulatedPsm(Node):
         base_frame: 4x4 pose of the RCM in ``<arm>_base`` (``measured_cp = base_frame @ local``).
         home_q: Joints homing moves to; default all zero, as the dVRK's PSM homing.
         homing_settle_s: Time a home takes before the move to ``home_q`` starts [s].
+        context: rclpy context of the node; default rclpy's default context.
     """
 
     def __init__(
@@ -97,13 +104,14 @@ class SimulatedPsm(Node):
         base_frame: np.ndarray | None = None,
         home_q: np.ndarray | None = None,
         homing_settle_s: float = HOMING_SETTLE_S,
+        context: Any = None,
     ) -> None:
         if not (np.isfinite(rate_hz) and 1.0 <= rate_hz <= 5000.0):
             raise ConfigurationError("rate_hz", rate_hz, "a publishing rate in 1..5000 Hz")
         if not (np.isfinite(homing_settle_s) and 0.0 <= homing_settle_s <= 60.0):
             raise ConfigurationError("homing_settle_s", homing_settle_s, "a duration in 0..60 s")
         self.topics = ArmTopics(arm)
-        super().__init__(f"{arm.lower()}_sim_dvrk")
+        super().__init__(f"{arm.lower()}_sim_dvrk", context=context)
         self.period_s = 1.0 / rate_hz
         self.homing_settle_s = float(homing_settle_s)
         self.model = model if model is not None else PsmModel.from_variant()
@@ -195,6 +203,9 @@ class SimulatedPsm(Node):
         self._publish_poses_and_force()
         command = message.string
         if command == "enable":
+            if self.state.state == "FAULT":
+                # Recover from where the arm is, as the PID does when it is enabled again.
+                self._servo(self._sample.q, self._sample.jaw)
             self._set_state("ENABLED")
         elif command == "disable":
             self._stop_motion()
@@ -209,6 +220,7 @@ class SimulatedPsm(Node):
             if self._homing:
                 return  # already homing: a repeated request neither restarts nor shortens it
             self._stop_motion()
+            self._servo(self._sample.q, self._sample.jaw)  # homing starts from where the arm is
             self._homing = True
             self._homing_moves_at_s = time.monotonic() + self.homing_settle_s
             self._mode = "position"
@@ -559,12 +571,33 @@ class SimulatedPsm(Node):
         if now - self._joints_published_s >= 0.5 * self.period_s:
             self._publish_joints()
         self._publish_poses_and_force()
+        self._check_tracking()
         if was_busy and not self.busy:
             # After the state at the goal: a client that reads on "not busy" finds the goal already sent.
             self._set_state(self.state.state, is_busy=False)
             self._goal_reached.publish(Bool(data=True))
         if now - self._state_published_s >= OPERATING_STATE_REPUBLISH_S:
             self._publish_operating_state(changed=False)
+
+    def _check_tracking(self) -> None:
+        """The PID's tracking-error trip: measured vs set-point beyond the dVRK's tolerance -> FAULT."""
+        if self.state.state != "ENABLED" or self._mode != "position":
+            return
+        errors = np.append(np.abs(self._sample.q - self._setpoint_q), abs(self._sample.jaw - self._setpoint_jaw))
+        tolerances = np.append(TRACKING_TOLERANCE, JAW_TRACKING_TOLERANCE)
+        over = np.flatnonzero(errors > tolerances)
+        if over.size == 0:
+            return
+        k = int(over[0])
+        name, unit = (*JOINT_NAMES, JAW_JOINT_NAME)[k], "m" if k == 2 else "rad"
+        self._stop_motion()
+        self._homing, self._homing_moves_at_s = False, None
+        self._set_state("FAULT", is_busy=False)
+        self._event(
+            "error",
+            f"{self.topics.arm}: PID tracking error on joint {name!r}: |measured - setpoint| = {errors[k]:.4f} {unit}, "
+            f"tolerance {tolerances[k]:g} {unit}; arm in FAULT, send enable to recover",
+        )
 
     def _stamp(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
