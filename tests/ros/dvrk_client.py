@@ -122,7 +122,7 @@ class Process:
         return int(self.process.returncode)
 
 
-def start_sim(domain_id: int, *extra: str, ready_timeout_s: float = 120.0) -> Process:
+def start_sim(domain_id: int, *extra: str, ready_timeout_s: float = 240.0) -> Process:
     """Start ``tissue-retract sim-dvrk`` and wait until it serves (its start-up line)."""
     command = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--domain-id", str(domain_id), *extra]
     sim = Process(command, local_ros_env(domain_id))

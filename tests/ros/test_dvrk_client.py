@@ -86,7 +86,7 @@ def test_dvrk_script_runs_to_completion_on_a_task_scene(script: str) -> None:
     try:
         start = time.monotonic()
         client = run_client(client_dir() / "scripts" / script, domain, "-a", arm, stdin=stdin)
-        output = _finish(client, 300.0)
+        output = _finish(client, 480.0)
         wall_s = time.monotonic() - start
     finally:
         sim_status = sim.stop()
