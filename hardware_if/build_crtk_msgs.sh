@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Build and install the crtk_msgs interfaces (OperatingState, StringStamped) into a Python venv that
-# holds ROS 2 Jazzy from PyPI (the project's `ros` extra). Plain cmake, no colcon.
+# Build and install the crtk_msgs interfaces (all of collaborative-robotics/crtk_msgs 1.3.0: messages and
+# services) into a Python venv that holds ROS 2 Jazzy from PyPI (the project's `ros` extra). Plain cmake,
+# no colcon.
 #
 # Usage: hardware_if/build_crtk_msgs.sh [VENV]   (default: .venv, or $VIRTUAL_ENV when set)
 #
@@ -15,9 +16,10 @@ venv="$(cd "$venv" && pwd)"
 python="$venv/bin/python"
 stamp="$venv/share/crtk_msgs/.source-hash"
 
-hash="$(cd "$src" && cat package.xml CMakeLists.txt msg/*.msg | sha256sum | cut -d' ' -f1)"
+check="from crtk_msgs.msg import OperatingState, StringStamped; from crtk_msgs.srv import QueryForwardKinematics, QueryInverseKinematics"
+hash="$(cd "$src" && cat package.xml CMakeLists.txt msg/*.msg srv/*.srv | sha256sum | cut -d' ' -f1)"
 if [[ "${FORCE:-0}" != 1 && -f "$stamp" && "$(cat "$stamp")" == "$hash" ]] \
-    && "$python" -c "from crtk_msgs.msg import OperatingState, StringStamped" 2>/dev/null; then
+    && "$python" -c "$check" 2>/dev/null; then
     echo "crtk_msgs: up to date in $venv"
     exit 0
 fi
@@ -43,7 +45,7 @@ cmake -S "$src" -B "$build" \
 cmake --build "$build" -j "$jobs" > "$build/build.log" 2>&1 || { tail -n 60 "$build/build.log" >&2; exit 1; }
 cmake --install "$build" > "$build/install.log" 2>&1 || { cat "$build/install.log" >&2; exit 1; }
 
-"$python" -c "from crtk_msgs.msg import OperatingState, StringStamped" \
+"$python" -c "$check" \
     || { echo "crtk_msgs: built but not importable from $python" >&2; exit 1; }
 mkdir -p "$(dirname "$stamp")"
 echo "$hash" > "$stamp"

@@ -19,6 +19,7 @@ from psm_control.spec import DVRK_JOINT_NAMES
 
 __all__ = [
     "COMMAND_TOPICS",
+    "CONSOLE_INPUT_TOPICS",
     "DEFAULT_ARM",
     "DEFAULT_RATE_HZ",
     "EVENT_TOPICS",
@@ -26,6 +27,7 @@ __all__ = [
     "JOINT_NAMES",
     "MOTION_TOPICS",
     "OPERATING_STATES",
+    "SERVICES",
     "STATE_COMMANDS",
     "STATE_TOPICS",
     "TRACKING_TOLERANCE",
@@ -67,14 +69,38 @@ STATE_TOPICS = (
     "jaw/setpoint_js",
     "body/measured_cf",
     "spatial/measured_cf",
+    "measured_cv",
+    "local/measured_cv",
+    "body/jacobian",
+    "spatial/jacobian",
 )
 #: Event topics the arm publishes (QoS :func:`event_qos`).
-EVENT_TOPICS = ("operating_state", "error", "warning", "status", "goal_reached")
+EVENT_TOPICS = ("operating_state", "error", "warning", "status", "goal_reached", "trajectory_j/ratio")
 #: Motion topics a client publishes (QoS :func:`periodic_qos`).
 MOTION_TOPICS = ("servo_jp", "move_jp", "servo_cp", "move_cp", "jaw/servo_jp", "jaw/move_jp")
 #: Command topics a client publishes: motion and ``state_command`` (which uses :func:`event_qos`).
 COMMAND_TOPICS = (*MOTION_TOPICS, "state_command")
-_ALL_TOPICS = (*STATE_TOPICS, *EVENT_TOPICS, *COMMAND_TOPICS)
+#: The rest of the dVRK 2.4 console's inputs that its Python client publishes (``dvrk.psm``): relative and
+#: effort commands, hold/free and settings. The simulated console serves them; this project's client does
+#: not use them.
+CONSOLE_INPUT_TOPICS = (
+    "servo_jr",
+    "move_jr",
+    "servo_jf",
+    "jaw/servo_jf",
+    "body/servo_cf",
+    "spatial/servo_cf",
+    "hold",
+    "free",
+    "trajectory_j/set_ratio",
+    "use_gravity_compensation",
+    "body/set_cf_orientation_absolute",
+    "emulate_tool_present",
+)
+#: The console's services (``crtk_msgs/srv``): forward kinematics (in ``<arm>_base`` and about the RCM)
+#: and inverse kinematics.
+SERVICES = ("forward_kinematics", "local/forward_kinematics", "inverse_kinematics")
+_ALL_TOPICS = (*STATE_TOPICS, *EVENT_TOPICS, *COMMAND_TOPICS, *CONSOLE_INPUT_TOPICS, *SERVICES)
 
 _ARM_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -124,8 +150,9 @@ class ArmTopics:
         """The fully qualified name of a CRTK topic, e.g. ``topic("local/measured_cp")``.
 
         Raises:
-            ConfigurationError: ``name`` is not one of :data:`STATE_TOPICS`, :data:`EVENT_TOPICS` or
-                :data:`COMMAND_TOPICS` (a typo would otherwise listen on a topic nobody publishes).
+            ConfigurationError: ``name`` is not one of :data:`STATE_TOPICS`, :data:`EVENT_TOPICS`,
+                :data:`COMMAND_TOPICS`, :data:`CONSOLE_INPUT_TOPICS` or :data:`SERVICES` (a typo would
+                otherwise listen on a topic nobody publishes).
         """
         if name not in _ALL_TOPICS:
             raise ConfigurationError("topic", name, "one of " + ", ".join(_ALL_TOPICS))

@@ -64,19 +64,25 @@ def run(args: argparse.Namespace) -> int:
     if task is not None:
         base_frame, home_q = task.base_frame, task.home_q
     with ros_session():
-        node = SimulatedPsm(args.arm, rate_hz=args.rate, arm_model=task, base_frame=base_frame, home_q=home_q)
-        if task is not None:
-            TaskTopics(node, task)
-            node.get_logger().info(f"task {args.task!r} scene (seed {args.seed}); task topics under /{args.arm}/task/")
-        node.get_logger().info(
-            f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
-        )
+        node: SimulatedPsm | None = None
+        # Ctrl-C may come at any point once the start-up line is out (a client waits for it), even
+        # before spin() starts: all of it ends the server cleanly.
         try:
+            node = SimulatedPsm(args.arm, rate_hz=args.rate, arm_model=task, base_frame=base_frame, home_q=home_q)
+            if task is not None:
+                TaskTopics(node, task)
+                node.get_logger().info(
+                    f"task {args.task!r} scene (seed {args.seed}); task topics under /{args.arm}/task/"
+                )
+            node.get_logger().info(
+                f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
+            )
             rclpy.spin(node)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:
-            node.destroy_node()
+            if node is not None:
+                node.destroy_node()
             if task is not None:
                 task.close()
     return 0

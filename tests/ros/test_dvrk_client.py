@@ -1,0 +1,98 @@
+"""The dVRK 2.4 Python client, unmodified, against sim-dvrk over loopback: a dVRK user's first move.
+
+Each test starts its own ``sim-dvrk`` on a domain id of its own and runs the client in a child process
+(``dvrk_client.py`` says where the client and PyKDL come from). Waits are on observable events: the
+simulator's start-up line, the client's exit; the client's own checks wait on the console's state.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from collections.abc import Iterator
+
+import pytest
+from dvrk_client import SCRIPTS_HERE, Process, client_dir, missing, run_client, start_sim
+
+from hardware_if.network import run_domain_id
+
+#: The client's own scripts that must run to completion, with the input they ask for.
+SCRIPTS = {
+    "dvrk_move_wait_test.py": ("PSM1", None),
+    "dvrk_arm_test.py": ("PSM2", None),
+    "dvrk_psm_test.py": ("PSM3", "\n" * 10),
+}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _client_present() -> None:
+    """The client is a real test dependency: its absence fails these tests with what to do."""
+    reason = missing()
+    if reason is not None:
+        pytest.fail(reason)
+
+
+def _domain(offset: int) -> int:
+    return run_domain_id(os.getpid() + 17 * (offset + 1))
+
+
+@pytest.fixture
+def kinematic_sim() -> Iterator[int]:
+    """A sim-dvrk without a task scene; yields its domain id."""
+    domain = _domain(0)
+    sim = start_sim(domain)
+    yield domain
+    assert sim.stop() == 0, sim.output()
+
+
+def _finish(process: Process, timeout_s: float) -> str:
+    status = process.wait(timeout_s)
+    if status is None:
+        process.stop()
+        pytest.fail(f"did not finish within {timeout_s} s:\n{process.output()}")
+    return process.output()
+
+
+def test_client_api_against_sim_dvrk(kinematic_sim: int) -> None:
+    """check_connections passes; reads are fresh; move/jaw waits end on time; hold/free/effort/FK/IK are served."""
+    client = run_client(SCRIPTS_HERE / "dvrk_client_checks.py", kinematic_sim, "PSM1")
+    output = _finish(client, 240.0)
+    checks = dict(re.findall(r"^CHECK (\S+) (ok|FAIL)", output, flags=re.MULTILINE))
+    failed = [name for name, result in checks.items() if result != "ok"]
+    assert not failed and "FAILED 0" in output, output
+    for name in (
+        "check_connections",
+        "move_jp_wait",
+        "jaw_open",
+        "jaw_close",
+        "hold",
+        "servo_jf",
+        "forward_kinematics",
+        "inverse_kinematics",
+        "late_client_reads_state",
+        "home_again",
+    ):
+        assert checks.get(name) == "ok", (name, output)
+
+
+@pytest.mark.parametrize("script", list(SCRIPTS))
+def test_dvrk_script_runs_to_completion_on_a_task_scene(script: str) -> None:
+    """The dVRK's own test script runs to completion against ``sim-dvrk --task lift``; no wait() times out."""
+    arm, stdin = SCRIPTS[script]
+    domain = _domain(1 + list(SCRIPTS).index(script))
+    sim = start_sim(domain, "--task", "lift", "--arm", arm)
+    try:
+        start = time.monotonic()
+        client = run_client(client_dir() / "scripts" / script, domain, "-a", arm, stdin=stdin)
+        output = _finish(client, 480.0)
+        wall_s = time.monotonic() - start
+    finally:
+        sim_status = sim.stop()
+    assert client.process.returncode == 0, output
+    waits = json.loads(re.findall(r"^WAITS (.*)$", output, flags=re.MULTILINE)[-1])
+    assert waits["count"] > 0 and waits["false"] == 0 and waits["max_s"] < 10.0, (waits, output)
+    assert "Traceback" not in output and "failed" not in output.lower(), output
+    assert sim_status == 0, sim.output()
+    print(f"{script}: {wall_s:.1f} s wall, {waits}")

@@ -1,0 +1,99 @@
+"""The simulated console's faults, in-process over loopback DDS: a SimulatedPsm whose arm cannot follow."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+import rclpy
+from crtk_msgs.msg import OperatingState, StringStamped
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from ros_process import wait_until
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from hardware_if.arm_model import ArmSample, KinematicArm
+from hardware_if.crtk import JOINT_NAMES, ArmTopics, event_qos, periodic_qos
+from hardware_if.sim_dvrk import SimulatedPsm
+
+
+class BlockedInsertion(KinematicArm):
+    """A kinematic arm whose insertion joint is blocked at 0 (a collision the servo cannot overcome)."""
+
+    def step(self, dt_s: float) -> ArmSample:
+        sample = super().step(dt_s)
+        q = sample.q.copy()
+        q[2] = 0.0
+        return sample._replace(q=q)
+
+
+class Operator(Node):
+    """What a client sees: operating states and errors; what it sends: state commands and move_jp."""
+
+    def __init__(self, arm: str, context: rclpy.Context) -> None:
+        super().__init__(f"operator_{time.monotonic_ns()}", context=context)
+        t = ArmTopics(arm).topic
+        self.states: list[OperatingState] = []
+        self.errors: list[str] = []
+        self.create_subscription(OperatingState, t("operating_state"), self.states.append, event_qos())
+        self.create_subscription(String, t("error"), lambda m: self.errors.append(m.data), event_qos())
+        self.command = self.create_publisher(StringStamped, t("state_command"), event_qos())
+        self.move = self.create_publisher(JointState, t("move_jp"), periodic_qos())
+
+    def state(self) -> tuple[str, bool, bool]:
+        last = self.states[-1] if self.states else OperatingState()
+        return last.state, last.is_homed, last.is_busy
+
+
+@pytest.fixture
+def console() -> Iterator[tuple[SimulatedPsm, Operator]]:
+    """A SimulatedPsm (PSM5, blocked insertion, no homing delay) and an operator node, spun in a thread."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    sim = SimulatedPsm("PSM5", arm_model=BlockedInsertion(), homing_settle_s=0.0, context=context)
+    operator = Operator("PSM5", context=context)
+    executor = MultiThreadedExecutor(context=context)
+    executor.add_node(sim)
+    executor.add_node(operator)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    yield sim, operator
+    executor.shutdown()
+    sim.destroy_node()
+    operator.destroy_node()
+    rclpy.shutdown(context=context)
+    thread.join(timeout=5.0)
+
+
+def _send(operator: Operator, command: str) -> None:
+    operator.command.publish(StringStamped(string=command))
+
+
+def test_tracking_error_trips_to_fault_and_enable_recovers(console: tuple[SimulatedPsm, Operator]) -> None:
+    """Insertion held back by more than 50 mm -> FAULT with an error naming the joint; enable recovers."""
+    sim, operator = console
+    assert wait_until(lambda: operator.command.get_subscription_count() > 0 and operator.states, timeout_s=30.0)
+    _send(operator, "home")
+    assert wait_until(lambda: operator.state() == ("ENABLED", True, False), timeout_s=30.0), operator.states
+    assert wait_until(lambda: operator.move.get_subscription_count() > 0, timeout_s=30.0)
+    goal = JointState(name=list(JOINT_NAMES))
+    goal.position = [0.0, 0.0, 0.2, 0.0, 0.0, 0.0]
+    operator.move.publish(goal)
+    assert wait_until(lambda: operator.state()[0] == "FAULT", timeout_s=30.0), operator.states
+    assert not operator.state()[2]
+    assert wait_until(lambda: any("tracking error" in e and "'insertion'" in e for e in operator.errors), 10.0)
+    setpoint_at_fault = sim._setpoint_q[2]
+    assert 0.05 < setpoint_at_fault < 0.2  # stopped at the trip, not at the goal
+
+    errors = len(operator.errors)
+    operator.move.publish(goal)
+    assert wait_until(lambda: len(operator.errors) > errors, 10.0)
+    assert "not ready" in operator.errors[-1]  # a FAULT arm refuses motion
+
+    _send(operator, "enable")
+    assert wait_until(lambda: operator.state()[0] == "ENABLED", timeout_s=30.0)
+    np.testing.assert_allclose(sim._setpoint_q, np.zeros(6), atol=1e-12)  # recovered where the arm is
