@@ -68,9 +68,11 @@ MAX_CONTROL_RATE_HZ = 5000.0
 DEADMAN_MIN_PERIODS = 2
 
 
-#: Lowest retraction-force limit [N]: below it the dVRK's body/measured_cf estimate (from motor currents)
-#: cannot tell a pull from noise; the most delicate preset (nerve) is 0.4 N.
-MIN_FORCE_LIMIT_N = 0.1
+#: Lowest retraction-force limit [N]: below the smallest forces reported in surgery (sharp dissection
+#: 0.03 N, ophthalmology 0.04 N; Golahmadi et al. 2021) no force signal of the PSM tells a pull from
+#: noise. Limits near it are allowed (a limit below the held tissue's static load is warned about at
+#: grasp); the most delicate preset (nerve) is 0.4 N.
+MIN_FORCE_LIMIT_N = 0.01
 #: Plausible joint-limit settings as multiples of the dVRK's move_jp limits of each joint: from
 #: ``low`` (slower than this never reaches a target) to ``high`` (faster than any arm can servo).
 _RATE_FACTORS: dict[str, tuple[float, float]] = {

@@ -126,7 +126,7 @@ def _cases(tmp: Path) -> list[Case]:
             _write(cfg / "dup.toml", "force_limit_n = 2.0\nforce_limit_n = 40.0\n"),
             ("TOML", "duplicate"),
         ),
-        "tiny-force": (_write(cfg / "tiny.toml", "force_limit_n = 1e-300\n"), ("force_limit_n", "[0.1, 50]")),
+        "tiny-force": (_write(cfg / "tiny.toml", "force_limit_n = 1e-300\n"), ("force_limit_n", "[0.01, 50]")),
         "huge-acceleration": (
             _write(cfg / "acc.toml", "acceleration_limit = [1e300, 1e300, 1e300, 1e300, 1e300, 1e300]\n"),
             ("acceleration_limit", "move_jp"),
