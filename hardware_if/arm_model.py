@@ -8,7 +8,7 @@ the same protocol and also reports the tissue force for ``body/measured_cf``.
 
 from __future__ import annotations
 
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -45,6 +45,9 @@ class ArmModel(Protocol):
 
     def step(self, dt_s: float) -> ArmSample:
         """Advance by ``dt_s`` [s] (0 to only read the state) and return the measured state."""
+
+    def scene_markers(self) -> dict[str, Any]:
+        """What the 3-D scene shows besides the arm (tissue, site, goal, grasp, force), in ``<arm>_base``."""
 
 
 class KinematicArm:
@@ -83,3 +86,7 @@ class KinematicArm:
 
     def _sample(self) -> ArmSample:
         return ArmSample(self._q.copy(), self._qd.copy(), self._jaw, np.zeros(3))
+
+    def scene_markers(self) -> dict[str, Any]:
+        """Nothing but the arm: there is no task scene."""
+        return {}

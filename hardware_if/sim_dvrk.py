@@ -67,6 +67,7 @@ from hardware_if.crtk import (
 from hardware_if.motion import JointTrajectory, inverse_kinematics
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
+from sim.scene_stream import SceneStream
 
 __all__ = ["HOMING_SETTLE_S", "OPERATING_STATE_REPUBLISH_S", "SimulatedPsm"]
 
@@ -91,6 +92,8 @@ class SimulatedPsm(Node):
         base_frame: 4x4 pose of the RCM in ``<arm>_base`` (``measured_cp = base_frame @ local``).
         home_q: Joints homing moves to; default all zero, as the dVRK's PSM homing.
         homing_settle_s: Time a home takes before the move to ``home_q`` starts [s].
+        scene: Where the arm (measured and set-point) and the task's markers are streamed as a 3-D scene
+            every tick (``sim-dvrk --live``); None streams nothing.
         context: rclpy context of the node; default rclpy's default context.
     """
 
@@ -104,6 +107,7 @@ class SimulatedPsm(Node):
         base_frame: np.ndarray | None = None,
         home_q: np.ndarray | None = None,
         homing_settle_s: float = HOMING_SETTLE_S,
+        scene: SceneStream | None = None,
         context: Any = None,
     ) -> None:
         if not (np.isfinite(rate_hz) and 1.0 <= rate_hz <= 5000.0):
@@ -120,6 +124,7 @@ class SimulatedPsm(Node):
         self._ik_configuration = self.configuration.copy()
         self._fk_configuration = self.configuration.copy()
         self.home_q = np.zeros(6) if home_q is None else self.model.check_joints(home_q, strict=True)
+        self.scene = scene
         self.state = OperatingState(state="DISABLED", is_homed=False, is_busy=False)
         self._state_stamp_ns = 0
         self._state_published_s = float("-inf")
@@ -571,6 +576,17 @@ class SimulatedPsm(Node):
         if now - self._joints_published_s >= 0.5 * self.period_s:
             self._publish_joints()
         self._publish_poses_and_force()
+        if self.scene is not None:
+            self.scene.scene.base_frame = self.configuration.base_frame
+            markers = self.arm_model.scene_markers()
+            self.scene.tick(
+                time.time(),
+                self._sample.q,
+                self._sample.jaw,
+                commanded_q=self._setpoint_q,
+                commanded_jaw=self._setpoint_jaw,
+                **markers,
+            )
         self._check_tracking()
         if was_busy and not self.busy:
             # After the state at the goal: a client that reads on "not busy" finds the goal already sent.

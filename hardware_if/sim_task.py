@@ -130,6 +130,18 @@ class TaskArm:
             "grasped": bool(self.env.scene.grasp.holding),
         }
 
+    def scene_markers(self) -> dict[str, Any]:
+        """The flap, site, goal, grasp point and the force on it, in the world (= ``<arm>_base``)."""
+        goal = np.asarray(self.env.goal, dtype=float)
+        return {
+            "nodes": self.env.scene.tissue.positions(),
+            "triangles": self.env.scene.tissue.triangles,
+            "site": np.asarray(self.env.site_position(), dtype=float),
+            "goal": goal if goal.shape == (3,) else None,
+            "grasp": np.asarray(self.env.grasp_position(), dtype=float),
+            "force_n": np.asarray(self._info.get("force_n", np.zeros(3)), dtype=float),
+        }
+
     # -- ArmModel ----------------------------------------------------------------------------------
     def reset(self, q: np.ndarray, jaw: float) -> ArmSample:
         """Place the arm at ``q`` in the current scene."""

@@ -15,12 +15,17 @@ Needs the ``ros`` extra. Ctrl-C stops it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 
 import numpy as np
 
 from hardware_if.network import apply_local_ros_env, environment_domain_id
 from hardware_if.session import require_ros, ros_session
 from hardware_if.sim_task import TaskArm, TaskTopics
+from psm_control.robot import PsmModel
+from sim.scene3d import PsmScene
+from sim.scene_stream import LiveScene, SceneStream
+from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
 
@@ -44,6 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar=("X", "Y", "Z"),
         help="position of the RCM in <arm>_base [m], as set_base_frame would set it (default: 0 0 0)",
     )
+    add_live_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,12 +69,20 @@ def run(args: argparse.Namespace) -> int:
     home_q = None
     if task is not None:
         base_frame, home_q = task.base_frame, task.home_q
-    with ros_session():
+    live_view = contextlib.nullcontext() if args.live is None else LiveScene(port=args.live)
+    with live_view as live, ros_session():
         node: SimulatedPsm | None = None
         # Ctrl-C may come at any point once the start-up line is out (a client waits for it), even
         # before spin() starts: all of it ends the server cleanly.
         try:
-            node = SimulatedPsm(args.arm, rate_hz=args.rate, arm_model=task, base_frame=base_frame, home_q=home_q)
+            scene = None
+            if live is not None:  # the arm and the task's markers for the Foxglove app, 20 times a second
+                model = PsmModel.from_variant()
+                scene = SceneStream(PsmScene(model, f"{args.arm}_base", base_frame), [live], period_s=0.05)
+                print(f"live: ws://127.0.0.1:{live.port} (open it in the Foxglove app)", flush=True)
+            node = SimulatedPsm(
+                args.arm, rate_hz=args.rate, arm_model=task, base_frame=base_frame, home_q=home_q, scene=scene
+            )
             if task is not None:
                 TaskTopics(node, task)
                 node.get_logger().info(
