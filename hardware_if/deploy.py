@@ -49,7 +49,7 @@ from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, Me
 from psm_control.errors import ConfigurationError
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
-from sim.evaluation import run_episode
+from sim.evaluation import PolicyError, run_episode
 from sim.scene import PhysicsParams
 from sim.scene3d import PsmScene
 from sim.scene_stream import LiveScene, SceneStream, StreamScene
@@ -326,6 +326,11 @@ def deploy(options: DeployOptions, *, echo: Any = print) -> DeployReport:
                     _deploy_dvrk(options, report, recorder, echo, stopper)
             except HoldError as e:
                 _hold(report, recorder, e)
+            except PolicyError as e:
+                # The episode runner wraps whatever the policy call raised; the checked policy's own
+                # verdict (policy error, invalid action, overrun) is the hold, with its data.
+                cause = e.__cause__
+                _hold(report, recorder, cause if isinstance(cause, HoldError) else HoldError("policy error", str(e)))
             except (KeyboardInterrupt, ConfigurationError):
                 raise
             except Exception as e:  # anything else while commanding is a hold too, never a traceback
