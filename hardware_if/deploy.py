@@ -176,9 +176,6 @@ class DeployReport:
     interventions: collections.Counter[str] = field(default_factory=collections.Counter)
     peak_force_n: float = 0.0
     predicted_peak_force_n: float = 0.0
-    force_limit_exceeded: int = 0
-    max_force_excess_n: float = 0.0
-    force_exceeded_s: float = 0.0
     fault: str = ""
     interrupted: bool = False
     signal: str = ""
@@ -221,10 +218,6 @@ class DeployReport:
         out.append(f"  safety: {self.safety_stops} stop tick(s); interventions: {top}")
         out.append(f"  holds: {self.holds}; invalid actions: {self.invalid_actions}")
         out.append(f"  peak measured force {self.peak_force_n:.3f} N")
-        out.append(
-            f"  force limit exceeded: {self.force_limit_exceeded} time(s), max excess {self.max_force_excess_n:.3f} N, "
-            f"{self.force_exceeded_s:.2f} s"
-        )
         if self.dry_run:
             out.append(f"  predicted peak force {self.predicted_peak_force_n:.3f} N")
         if self.fault:
@@ -268,38 +261,6 @@ def _account(report: DeployReport, recorder: Recorder, output: ControlOutput) ->
     if output.safety_stop:
         report.safety_stops += 1
         recorder.write("/deploy/event", {"kind": "safety_stop", "text": output.reason})
-
-
-def _account_force(report: DeployReport, recorder: Recorder, chain: Any) -> None:
-    """Count the episode's force-limit exceedances (the chain's monitor) and record each as an event."""
-    monitor = chain.force_monitor
-    monitor.finish()
-    for event in monitor.take():
-        report.force_limit_exceeded += 1
-        report.max_force_excess_n = max(report.max_force_excess_n, event.excess_n)
-        report.force_exceeded_s += event.duration_s
-        recorder.write("/deploy/event", {"kind": "force_limit_exceeded", **event.to_dict()})
-    for warning in chain.force_warnings:
-        recorder.write("/deploy/event", {"kind": "force_warning", "text": warning})
-    chain.force_warnings.clear()
-
-
-def _account_sim_force(report: DeployReport, recorder: Recorder, result: Any) -> None:
-    """The same count from a simulated episode's result (the environment drained the chain's monitor)."""
-    if result.force_limit_exceeded:
-        report.force_limit_exceeded += result.force_limit_exceeded
-        report.max_force_excess_n = max(report.max_force_excess_n, result.max_force_excess_n)
-        report.force_exceeded_s += result.force_exceeded_s
-        recorder.write(
-            "/deploy/event",
-            {
-                "kind": "force_limit_exceeded",
-                "count": result.force_limit_exceeded,
-                "excess_n": result.max_force_excess_n,
-                "duration_s": result.force_exceeded_s,
-                "limit_n": result.force_limit_n,
-            },
-        )
 
 
 def deploy(options: DeployOptions, *, echo: Any = print) -> DeployReport:
@@ -462,7 +423,6 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
             entry = {"episode": episode, **result.to_dict()}
             report.episodes.append(entry)
             report.invalid_actions += int(entry.get("invalid_actions", 0))
-            _account_sim_force(report, recorder, result)
             recorder.write("/deploy/event", {"kind": "episode_end", **entry})
             echo(f"episode {episode}: success={result.success} peak force {result.peak_force_n:.3f} N")
     finally:
@@ -636,7 +596,6 @@ def _dvrk_episode(
         steps += 1
         step_end = time.monotonic()
     entry: dict[str, Any] = {"episode": episode, "seed": seed, "steps": steps, "peak_force_n": peak}
-    _account_force(report, recorder, chain)
     try:
         success, distance = view.success()
         entry.update(success=bool(success), goal_distance_m=distance)

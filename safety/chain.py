@@ -27,10 +27,8 @@ from psm_control.frames import BaseTransform
 from psm_control.ik import DifferentialIk
 from psm_control.reductions import all_of
 from psm_control.robot import PsmModel
-from psm_control.urdf import GRASP_FRAME
 from safety.config import SafetyConfig
 from safety.filter import SafetyFilter
-from safety.force_monitor import ForceLimitMonitor
 from safety.limits import (
     FilterState,
     JointAccelerationLimit,
@@ -64,7 +62,7 @@ def default_limits(config: SafetyConfig) -> list[Limit]:
         RcmInsertionLimit(config.min_insertion_m, config.spec.dof),
         JointAccelerationLimit(config.acceleration, step, lower, upper),
         WorkspaceBoxLimit(np.asarray(config.workspace_min_m), np.asarray(config.workspace_max_m), config.cbf_gamma),
-        RetractionForceLimit(config.effective_force_limit_n, dof=step.size, reserve=config.force_reserve),
+        RetractionForceLimit(config.effective_force_limit_n, dof=step.size),
     ]
 
 
@@ -132,10 +130,6 @@ class ControlChain:
             max_n_per_m=self.config.stiffness_max_n_per_m,
             forgetting=self.config.stiffness_forgetting,
         )
-        self.force_monitor = ForceLimitMonitor(self.config.effective_force_limit_n, self.control_period_s)
-        #: Warnings about the force limit (one line each), e.g. a limit below the static load at grasp.
-        self.force_warnings: list[str] = []
-        self._grip_ticks = -1
         self.log = SafetyLog(tuple(limit.name for limit in self.limits), self.control_period_s, self.model.dof)
         self._goal_local: np.ndarray | None = None
         self._jaw_goal = 0.0
@@ -181,9 +175,6 @@ class ControlChain:
                 q = self.model.home()
             self._jaw = float(measured.jaw) if np.isfinite(measured.jaw) else 0.0
         self._jaw_goal = self._jaw
-        self.force_monitor.reset()
-        self._grip_ticks = -1
-        self._check_static_load(measured.force_n, "at start")
         self._command_state.update(q)
         self.smoother.reset(q)
         self.verifier.reset(JointCommand(q.copy(), self._zeros.copy(), self._zeros.copy(), self._jaw, self._stamp))
@@ -259,42 +250,6 @@ class ControlChain:
             return "bad measurement: force is not 3 finite numbers"
         return ""
 
-    def _force_norm(self, force_n: object) -> float:
-        force = np.asarray(force_n, dtype=float)
-        return math.sqrt(float(force @ force)) if force.shape == (3,) else math.nan
-
-    def _check_static_load(self, force_n: object, when: str) -> None:
-        """Warn (once per episode) when holding the tissue already costs more than the filter plans to."""
-        try:
-            load = self._force_norm(force_n)
-        except (TypeError, ValueError):
-            return
-        planned = self.config.effective_force_limit_n * (1.0 - self.config.force_reserve)
-        if not load > planned:  # also NaN
-            return
-        message = (
-            f"WARNING: force limit {self.config.effective_force_limit_n:g} N is below the static load of the held "
-            f"tissue: {load:.3f} N measured {when} (the filter plans to {planned:.3g} N); it will not lift, "
-            "only back off"
-        )
-        self.force_warnings.append(message)
-        print(message, file=sys.stderr)
-
-    def _watch_force(self, force_n: object) -> None:
-        """Feed the force monitor, and check the static load once the jaw has closed and settled."""
-        try:
-            magnitude = self._force_norm(force_n)
-        except (TypeError, ValueError):
-            return
-        self.force_monitor.update(self._stamp, magnitude)
-        if self._jaw >= self.config.gripping_below_rad:
-            self._grip_ticks = -1
-            return
-        self._grip_ticks += 1
-        # A quarter second after the jaw closes the held flap has settled: its force is what holding costs.
-        if self._grip_ticks == max(1, round(0.25 / self.control_period_s)):
-            self._check_static_load(force_n, "at grasp")
-
     def _command(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> JointCommand:
         step = self._jaw_step
         self._jaw += min(max(self._jaw_goal - self._jaw, -step), step)
@@ -327,7 +282,6 @@ class ControlChain:
         if not self._is_reset:
             self.reset(measured)
         self._stamp += self.control_period_s
-        self._watch_force(measured.force_n)
         if self._latched:
             return self._stop(self._latched, brake=False)
         reason = self._pending_stop or self._check_measured(measured, self._stamp)
@@ -345,8 +299,7 @@ class ControlChain:
             dq_nominal = self.ik.solve(self._command_state, self._goal_local, lower, upper).dq
         force = -np.asarray(measured.force_n, dtype=float)  # force_n is the tissue's force on the tool
         tool = self._base.point(self._command_state.local_pose()[:3, 3])
-        held = self._base.point(self._command_state.frame_pose_local(GRASP_FRAME)[:3, 3])
-        stiffness = self.stiffness.update(held, force)
+        stiffness = self.stiffness.update(tool, force)
         interventions: tuple[str, ...] = ()
         intervened = active = 0
         if self.safety:
@@ -358,8 +311,6 @@ class ControlChain:
                 force,
                 stiffness,
                 self.control_period_s,
-                self._jaw < self.config.gripping_below_rad,
-                self._base.vectors(self._command_state.local_jacobian(GRASP_FRAME)[:3]),
             )
             try:
                 result = self.filter.filter(state, dq_nominal)

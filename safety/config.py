@@ -133,10 +133,6 @@ class SafetyConfig:
         stiffness_min_n_per_m: Lowest stiffness the force limit will ever assume [N/m].
         stiffness_max_n_per_m: Highest stiffness estimate accepted [N/m].
         stiffness_forgetting: RLS forgetting factor in (0.5, 1].
-        force_reserve: Fraction of the force limit the filter's plan keeps in reserve for what its
-            quasi-static prediction misses (tissue still moving after the tool stops), in [0, 0.5].
-        gripping_below_rad: A commanded jaw opening below this counts as gripping tissue [rad]: the force
-            limit then bounds the step in every direction even before a force is measured.
         deadman_timeout_s: Measurements older than this stop the chain [s]; at least
             :data:`DEADMAN_MIN_PERIODS` control periods, since a fresh measurement is already one period
             old when the tick that uses it runs.
@@ -180,8 +176,6 @@ class SafetyConfig:
     stiffness_min_n_per_m: float = 50.0
     stiffness_max_n_per_m: float = 5000.0
     stiffness_forgetting: float = 0.98
-    force_reserve: float = 0.1
-    gripping_below_rad: float = 0.3
     deadman_timeout_s: float = 0.05
     max_translation_m: float = 0.05
     max_yaw_rad: float = 0.5
@@ -311,9 +305,6 @@ class SafetyConfig:
             )
         if not (_is_number(self.stiffness_forgetting) and 0.5 < self.stiffness_forgetting <= 1.0):
             raise ConfigurationError("stiffness_forgetting", self.stiffness_forgetting, "a number in (0.5, 1]")
-        if not (isinstance(self.force_reserve, int | float) and 0.0 <= self.force_reserve <= 0.5):
-            raise ConfigurationError("force_reserve", self.force_reserve, "a fraction in [0, 0.5]")
-        _positive("gripping_below_rad", self.gripping_below_rad, math.pi)
         _positive("deadman_timeout_s", self.deadman_timeout_s, 1.0)
         if self.deadman_timeout_s < DEADMAN_MIN_PERIODS * self.control_period_s * (1.0 - 1e-9):
             raise ConfigurationError(

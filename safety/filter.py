@@ -422,37 +422,9 @@ class SafetyFilter:
             return x, self._zero_slack, status
         x, _, status, iterations = self._stage(True, lb, ub, rows, u_rows)
         self._iterations += iterations
-        if x is None or status not in _SOLVED:
-            least = self._least_motion()
-            if least is not None:
-                return least, self._least_motion_slack(least), "solved"
         if x is None:
             return None, self._zero_slack, status
         return x[: self.dof], x[self.dof :], status
-
-    def _least_motion(self) -> np.ndarray | None:
-        """The smallest displacement the joint bounds allow, if it meets every hard row; else None.
-
-        The fallback when OSQP does not converge: ADMM can stall when soft rows with a tiny right-hand side
-        (a force budget of micrometres) meet joints that must keep braking (measured: 4000 iterations on
-        a force octahedron of 2e-3 under a 0.05 N limit). Stopping as soon as the bounds allow never adds
-        a step the hard limits forbid and adds the least motion to whatever the soft rows measure.
-        """
-        z = np.minimum(np.maximum(0.0, self._lb), self._ub)
-        excess = self._G @ z - self._h
-        if any_of(excess[self._hard_row] > self.hard_tolerance):
-            return None
-        return z
-
-    def _least_motion_slack(self, z: np.ndarray) -> np.ndarray:
-        """Each soft limit's normalised slack at ``z``: its largest row excess (0 when met)."""
-        if not self.n_slack:
-            return self._zero_slack
-        excess = np.maximum((self._G @ z - self._h) / self._row_norm, 0.0)
-        slack = np.zeros(self.n_slack)
-        soft = self._row_slack >= 0
-        np.maximum.at(slack, self._row_slack[soft], excess[soft])
-        return slack
 
     def _stage(
         self, slack: bool, lb: np.ndarray, ub: np.ndarray, rows: np.ndarray, u_rows: np.ndarray

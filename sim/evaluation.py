@@ -10,9 +10,6 @@ counts steps with a joint outside the PSM's limits, ``workspace_violation_mm`` i
 of the tool tip outside the control chain's workspace box (about the RCM), ``min_insertion_margin_m``
 the least insertion past the dVRK's 45 mm minimum, and ``safety_stops``/``interventions`` add up the
 chain's stopped ticks and the constraints that changed a command (once per constraint and step).
-``force_limit_exceeded`` counts the stretches of time the measured force spent above the chain's force
-limit (read at every control tick), with the largest excess and the time above it; the peak force
-includes those tick readings.
 """
 
 from __future__ import annotations
@@ -33,7 +30,6 @@ __all__ = [
     "Policy",
     "PolicyError",
     "check_start_inside_workspace",
-    "force_limit_summary",
     "run_episode",
     "summarize",
 ]
@@ -92,11 +88,6 @@ class EpisodeResult:
     safety_stops: int
     interventions: int
     invalid_actions: int = 0
-    force_limit_n: float = float("nan")
-    force_limit_exceeded: int = 0
-    max_force_excess_n: float = 0.0
-    force_exceeded_s: float = 0.0
-    force_warnings: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -121,9 +112,6 @@ def run_episode(
     peak, steps, violations, stops, interventions = 0.0, 0, 0, 0, 0
     margin = float(info["insertion_m"]) - minimum_insertion
     outside_m = float(info["workspace_violation_m"])
-    force_events, was_exceeded, max_excess = 0, False, 0.0
-    limit = _force_limit(env)
-    force_warnings = int(bool(info.get("force_warning")))
     while True:
         action = _call_policy(functools.partial(policy, observation), seed, steps)
         observation, _, terminated, truncated, info = env.step(action)
@@ -136,13 +124,6 @@ def run_episode(
         margin = min(margin, float(info["insertion_m"]) - minimum_insertion)
         outside_m = max(outside_m, float(info["workspace_violation_m"]))
         stops += int(info["safety_stops"])
-        exceeded = bool(info.get("force_limit_exceeded", False))
-        force_events += int(exceeded and not was_exceeded)
-        was_exceeded = exceeded
-        max_excess = max(max_excess, float(info.get("force_excess_n", 0.0)))
-        if exceeded:  # the control ticks read the force between steps too; their peak counts
-            peak = max(peak, limit + float(info["force_excess_n"]))
-        force_warnings += int(bool(info.get("force_warning")))
         interventions += len(info["interventions"])
         if terminated or truncated:
             break
@@ -165,17 +146,7 @@ def run_episode(
         safety_stops=stops,
         interventions=interventions,
         invalid_actions=counts["invalid_action"],
-        force_limit_n=limit,
-        force_limit_exceeded=force_events,
-        max_force_excess_n=max_excess,
-        force_exceeded_s=float(info.get("force_exceeded_s", 0.0)),
-        force_warnings=force_warnings,
     )
-
-
-def _force_limit(env: Any) -> float:
-    config = getattr(getattr(env.unwrapped, "controller", None), "config", None)
-    return float(config.effective_force_limit_n) if config is not None else float("nan")
 
 
 def check_start_inside_workspace(env: Any, outside_m: float) -> None:
@@ -216,20 +187,6 @@ def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, A
         "safety_stops": int(sum(r.safety_stops for r in results)),
         "invalid_actions": int(sum(r.invalid_actions for r in results)),
         "interventions": int(sum(r.interventions for r in results)),
-        **force_limit_summary(results),
-    }
-
-
-def force_limit_summary(results: Sequence[EpisodeResult]) -> dict[str, Any]:
-    """How often and how far the measured force passed the limit: never left out of a summary."""
-    ratios = [r.peak_force_n / r.force_limit_n for r in results if r.force_limit_n > 0]
-    return {
-        "force_limit_exceeded": int(sum(r.force_limit_exceeded for r in results)),
-        "force_limit_exceeded_episodes": int(sum(r.force_limit_exceeded > 0 for r in results)),
-        "max_force_excess_n": float(max((r.max_force_excess_n for r in results), default=0.0)),
-        "force_exceeded_s": float(sum(r.force_exceeded_s for r in results)),
-        "peak_over_limit": float(max(ratios)) if ratios else float("nan"),
-        "force_warnings": int(sum(r.force_warnings for r in results)),
     }
 
 

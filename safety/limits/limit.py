@@ -30,11 +30,6 @@ class FilterState(NamedTuple):
         retraction_force_n: Force the tool applies to the tissue (3,), base axes [N].
         stiffness_n_per_m: Current tissue stiffness estimate along the force direction [N/m].
         dt: Control period [s].
-        gripping: The jaw is closed (or closing) on tissue, so a force may build up from any direction even
-            while none is measured yet; the force limit then bounds the step in every direction.
-        grasp_jacobian: Linear Jacobian (3, 6) of the point the jaws hold, base axes, where the tissue's
-            force acts; None: ``tool_jacobian``. The wrist moves the jaws about the tool tip, so a step can
-            leave the tip still and pull the tissue.
     """
 
     q: np.ndarray
@@ -44,8 +39,6 @@ class FilterState(NamedTuple):
     retraction_force_n: np.ndarray
     stiffness_n_per_m: float
     dt: float
-    gripping: bool = True
-    grasp_jacobian: np.ndarray | None = None
 
 
 class LimitReport(NamedTuple):

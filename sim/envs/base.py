@@ -26,7 +26,7 @@ from sim.backend import SimBackend
 from sim.control import make_controller
 from sim.exposure import exposed_fraction, surface_samples
 from sim.grasp import GraspParams
-from sim.mechanics import DamageLimits, grasp_force, measure
+from sim.mechanics import DamageLimits, measure
 from sim.randomization import INSERTION_M_PER_RAD, Randomizer
 from sim.rendering import Camera, Frame, render
 from sim.scene import HIDDEN_HALF_EXTENTS_M, PhysicsParams, Scene
@@ -165,9 +165,6 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 config=cfg.safety_config,
             )
         self.controller.log.clear()
-        self._warnings_seen = 0
-        if isinstance(self.controller, ControlChain):  # sim-dvrk swaps in a set-point follower
-            self.controller.force_warnings.clear()
         self.controller.reset(self.backend.measure())
         self._nodes = self.scene.tissue.positions()
         self._exposure_points = surface_samples(self.scene.hidden_centre, HIDDEN_HALF_EXTENTS_M)
@@ -219,7 +216,6 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             else:
                 self.scene.step_physics(count)
             done += count
-            self._sense_force()
             measured = self._measured()
         previous = self._nodes
         self._nodes = self.scene.tissue.positions()
@@ -229,7 +225,6 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.scene.grasp.release()
         else:
             self._update_tissue(events)
-        self._force_events(events)
         events.update(
             sim_unstable=unstable,
             safety_stop=stops > 0,
@@ -313,44 +308,6 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         events["action_clipped"] = bool(np.any(clipped != raw))
         self._last_jaw_action = float(clipped[4])
         return clipped
-
-    def _force_events(self, events: dict[str, Any]) -> None:
-        """``force_limit_exceeded`` with its amount and the time spent above the limit, and new warnings."""
-        if not isinstance(self.controller, ControlChain):  # no chain here: the client's chain watches
-            return
-        monitor = self.controller.force_monitor
-        finished, current = monitor.take(), monitor.current
-        limit = monitor.force_limit_n
-        peaks = [e.peak_n for e in finished] + ([current.peak_n] if current is not None else [])
-        peaks.append(float(np.linalg.norm(self._force)))
-        exceeded = bool(finished) or current is not None or peaks[-1] > limit
-        events["force_limit_exceeded"] = exceeded
-        events["force_excess_n"] = max(peaks) - limit if exceeded else 0.0
-        events["force_exceeded_s"] = sum(e.duration_s for e in monitor.events) + (
-            current.duration_s if current is not None else 0.0
-        )
-        warnings = self.controller.force_warnings
-        events["force_warning"] = " | ".join(warnings[self._warnings_seen :])
-        self._warnings_seen = len(warnings)
-
-    def _sense_force(self) -> None:
-        """Refresh the force reading between control ticks, as a force sensor would be read every tick.
-
-        Read only once per environment step, the chain's second tick saw the force from before the first
-        tick's motion, so its prediction started from a force the tissue no longer had (measured: a
-        0.4 N limit passed by up to 1.8x).
-        """
-        assert self.scene is not None
-        grasp = self.scene.grasp
-        if not grasp.holding:
-            return
-        t = self.scene.tissue
-        nodes = t.positions()
-        if np.all(np.isfinite(nodes)):
-            self._force = grasp_force(
-                nodes, t.edges, t.rest_lengths, t.params.stiffness_n_per_m, grasp.nodes, t.node_mass_kg,
-                self.scene.gravity_m_s2,
-            )  # fmt: skip
 
     def _measured(self) -> MeasuredState:
         self.backend.force_n = self._force
@@ -448,10 +405,6 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "safety_stop", "new_grasp",
         ):  # fmt: skip
             info[flag] = bool(events.get(flag, False))
-        info["force_limit_exceeded"] = bool(events.get("force_limit_exceeded", False))
-        info["force_excess_n"] = float(events.get("force_excess_n", 0.0))
-        info["force_exceeded_s"] = float(events.get("force_exceeded_s", 0.0))
-        info["force_warning"] = str(events.get("force_warning", ""))
         info["safety_stops"] = int(events.get("safety_stops", 0))
         info["safety_reason"] = str(events.get("safety_reason", ""))
         info["interventions"] = tuple(events.get("interventions", ()))

@@ -43,8 +43,6 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
         },
         "safety_stops": sum(int(r.get("safety_stops") or 0) for r in finished),
         "invalid_actions": sum(int(r.get("invalid_actions") or 0) for r in finished),
-        "force_limit_exceeded": sum(int(r.get("force_limit_exceeded") or 0) for r in finished),
-        "max_force_excess_n": max((float(r.get("max_force_excess_n") or 0.0) for r in finished), default=0.0),
         "interventions": dict(sorted(interventions.items())),
         "failure_classes": dict(sorted(Counter(str(r.get("failure_class", "none")) for r in finished).items())),
     }
@@ -193,16 +191,10 @@ def write_report(
         ),
         ("safety stops", f"{summary['safety_stops']} ticks"),
         ("invalid actions", f"{summary['invalid_actions']} (held; the jaw kept)"),
-        (
-            "force limit exceeded",
-            f"{summary['force_limit_exceeded']} times, largest excess {quantity(summary['max_force_excess_n'], 'N')}",
-        ),
         ("interventions", _counts(summary["interventions"])),
         ("failure classes", _counts(summary["failure_classes"])),
         ("package", f"tissue-retract {__version__}"),
     ]
-    if summary["force_limit_exceeded"]:
-        alert.append("force limit exceeded")
     page.card(rows, alert=alert)
     if command:
         page.heading("Command")

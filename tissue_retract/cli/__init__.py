@@ -32,7 +32,7 @@ SUBCOMMANDS: dict[str, str] = {
     "reproduce": "train and evaluate the paper's Tables 1 and 2",
     "sim-dvrk": "serve the dVRK's CRTK topics from the simulation",
     "replay": "summarise and plot a recorded run",
-    "bench": "measure speed (env, chain, ros), the force bound (safety) and the fault matrix (faults)",
+    "bench": "measure speed (env, chain, ros) and run the fault matrix (faults)",
     "safety": "show the effective safety limits",
 }
 

@@ -16,7 +16,6 @@ TARGETS: dict[str, str] = {
     "chain": "control-chain tick latency against a naive reference",
     "ros": "servo_jp -> measured_js round trip over loopback ROS 2",
     "faults": "the deploy's fault matrix: fault -> exit status, hold reason, what the recording kept",
-    "safety": "worst peak/limit force ratio over adversaries x tasks x force presets x tissue stiffness",
 }
 
 #: The targets are this command's own subcommands.

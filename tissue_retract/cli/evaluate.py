@@ -129,12 +129,6 @@ def run(args: argparse.Namespace) -> int:
     table.add_row("mean peak force [N]", f"{summary['mean_peak_force_n']:.3f}")
     for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops", "invalid_actions", "interventions"):
         table.add_row(key, str(summary[key]))
-    table.add_row(
-        "force limit exceeded",
-        f"{summary['force_limit_exceeded']} time(s) in {summary['force_limit_exceeded_episodes']} episode(s), "
-        f"max excess {summary['max_force_excess_n']:.3f} N, {summary['force_exceeded_s']:.2f} s",
-    )
-    table.add_row("peak / limit", f"{summary['peak_over_limit']:.2f}")
     table.add_row("joint limit violations", str(summary["joint_limit_violations"]))
     table.add_row("workspace violation [mm]", f"{summary['workspace_violation_mm']:.2f}")
     table.add_row("min insertion margin [mm]", f"{1000 * summary['min_insertion_margin_m']:.1f}")
@@ -142,11 +136,6 @@ def run(args: argparse.Namespace) -> int:
         table.add_row(f"failure: {name}", str(count))
     table.add_row("env steps/s", f"{summary['env_steps_per_s']:.0f}")
     console.print(table)
-    if summary["force_limit_exceeded"]:
-        console.print(
-            f"[bold red]force_limit_exceeded[/]: the measured force passed the {force_limit_n:g} N limit "
-            f"{summary['force_limit_exceeded']} time(s), by up to {summary['max_force_excess_n']:.3f} N"
-        )
     if output is not None:
         write_json(output, {"summary": summary, "episodes": [r.to_dict() for r in results]})
     return 0
