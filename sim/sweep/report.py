@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
-from matplotlib.ticker import FormatStrFormatter
+from matplotlib.ticker import FormatStrFormatter, FuncFormatter
 
 from psm_control import __version__
 from sim.evaluation import FAILURE_CLASSES
@@ -109,10 +109,15 @@ def _plot_forces(records: Sequence[dict[str, Any]], path: Path, force_limit_n: f
 
 
 def _plain_log_axis(axis: Any) -> None:
-    """A logarithmic x axis labelled 0.5, 1, 2 rather than 5 x 10^-1."""
+    """A logarithmic x axis labelled 0.2, 0.5, 1, 2 rather than 5 x 10^-1 (minor ticks at 2, 3, 5 only)."""
     axis.set_xscale("log")
-    for ticks in (axis.xaxis.set_major_formatter, axis.xaxis.set_minor_formatter):
-        ticks(FormatStrFormatter("%g"))
+    axis.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+
+    def minor(value: float, _position: int) -> str:
+        mantissa = value / 10 ** math.floor(math.log10(value))
+        return f"{value:g}" if round(mantissa) in (2, 3, 5) and abs(mantissa - round(mantissa)) < 1e-6 else ""
+
+    axis.xaxis.set_minor_formatter(FuncFormatter(minor))
 
 
 def _centre(low: float, high: float, relative: bool) -> float:
