@@ -23,10 +23,28 @@ SCRIPTS_HERE = Path(__file__).resolve().parent
 PYKDL = Path(sys.prefix) / "opt" / "pykdl"
 
 
+def _origin() -> list[Path]:
+    """The folder a local clone was made from (a fresh clone's ``origin``), if it is a local path."""
+    try:
+        url = subprocess.run(
+            ["git", "-C", str(REPOSITORY), "config", "--get", "remote.origin.url"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=False,
+        ).stdout.strip()
+    except OSError:
+        return []
+    path = Path(url.removeprefix("file://"))
+    return [path.resolve()] if url and path.is_absolute() and path.exists() else []
+
+
 #: Where the client is looked for when ``$DVRK_CLIENT_DIR`` is not set: ``shared/dvrk-client`` beside the
-#: repository or beside any folder above it (a clone may sit deeper than the working copy), then the
-#: shared folder of the machine this project is developed on.
-_CANDIDATES = [parent / "shared" / "dvrk-client" for parent in REPOSITORY.parents] + [Path("/work/shared/dvrk-client")]
+#: repository or beside any folder above it, then beside the repository a clone was made from (a test
+#: clone in /tmp), then the shared folder of the machine this project is developed on.
+_CANDIDATES = [parent / "shared" / "dvrk-client" for root in (REPOSITORY, *_origin()) for parent in root.parents] + [
+    Path("/work/shared/dvrk-client")
+]
 
 
 def client_dir() -> Path:
@@ -40,7 +58,8 @@ def missing() -> str | None:
     """Why the client cannot run here, or None."""
     where = client_dir()
     if not (where / "crtk" / "__init__.py").is_file() or not (where / "dvrk" / "__init__.py").is_file():
-        return f"the dVRK client is not in {where} (set DVRK_CLIENT_DIR to the folder holding crtk/ and dvrk/)"
+        looked = ", ".join(str(c) for c in _CANDIDATES) if not os.environ.get("DVRK_CLIENT_DIR") else str(where)
+        return f"the dVRK client is not in {looked} (set DVRK_CLIENT_DIR to the folder holding crtk/ and dvrk/)"
     if not any((PYKDL / "usr" / "lib" / "python3" / "dist-packages").glob("PyKDL*.so")):
         return f"PyKDL is not in {PYKDL} (run `make install-dev`, which fetches it from Debian)"
     return None

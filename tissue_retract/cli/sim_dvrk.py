@@ -94,6 +94,11 @@ def run(args: argparse.Namespace) -> int:
             rclpy.spin(node)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
+        except Exception:
+            # Ctrl-C shuts the context down from rclpy's signal handler, which can land in the middle of
+            # a timer callback's publish ("publisher's context is invalid"): that is the clean stop too.
+            if rclpy.ok():
+                raise
         finally:
             if node is not None:
                 node.destroy_node()
