@@ -46,11 +46,10 @@ run: install
 	$(BIN)/tissue-retract deploy --policy pretrained --target sim --task multisite --episodes 20 --seed 1000 \
 		--record runs/make-run.mcap
 
-# The dVRK's own Python client (crtk, dvrk), run by tests/ros against sim-dvrk; not part of the package.
-DVRK_CLIENT_DIR ?= $(abspath ../shared/dvrk-client)
-
+# The dVRK's own Python client (crtk, dvrk), run by tests/ros against sim-dvrk, is not part of the
+# package: tests/ros/dvrk_client.py finds it ($DVRK_CLIENT_DIR, else shared/dvrk-client nearby).
 test: install-dev
-	DVRK_CLIENT_DIR="$(DVRK_CLIENT_DIR)" $(BIN)/python -m pytest
+	$(BIN)/python -m pytest
 
 lint: install-dev
 	$(BIN)/ruff check .

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import signal
 
 import numpy as np
 
@@ -57,9 +58,9 @@ def run(args: argparse.Namespace) -> int:
     # Read by rclpy and Fast DDS when they start, so set before the first import of rclpy.
     apply_local_ros_env(args.domain_id)
 
-    rclpy = require_ros()
+    require_ros()
     # The ros extra, imported after the environment it reads is set.
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     from hardware_if.sim_dvrk import SimulatedPsm
 
@@ -70,7 +71,11 @@ def run(args: argparse.Namespace) -> int:
     if task is not None:
         base_frame, home_q = task.base_frame, task.home_q
     live_view = contextlib.nullcontext() if args.live is None else LiveScene(port=args.live)
-    with live_view as live, ros_session():
+    # Python's own Ctrl-C handling, not rclpy's: rclpy's shuts the context down from under a timer
+    # callback's publish; a KeyboardInterrupt stops between two Python statements instead (installed
+    # explicitly: a process started in the background of a script inherits SIGINT ignored).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    with live_view as live, ros_session(signal_handlers=False):
         node: SimulatedPsm | None = None
         # Ctrl-C may come at any point once the start-up line is out (a client waits for it), even
         # before spin() starts: all of it ends the server cleanly.
@@ -83,6 +88,9 @@ def run(args: argparse.Namespace) -> int:
             node = SimulatedPsm(
                 args.arm, rate_hz=args.rate, arm_model=task, base_frame=base_frame, home_q=home_q, scene=scene
             )
+            # Made before the start-up line: a Ctrl-C right after it must not land in its constructor.
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
             if task is not None:
                 TaskTopics(node, task)
                 node.get_logger().info(
@@ -91,14 +99,9 @@ def run(args: argparse.Namespace) -> int:
             node.get_logger().info(
                 f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
             )
-            rclpy.spin(node)
+            executor.spin()
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
-        except Exception:
-            # Ctrl-C shuts the context down from rclpy's signal handler, which can land in the middle of
-            # a timer callback's publish ("publisher's context is invalid"): that is the clean stop too.
-            if rclpy.ok():
-                raise
         finally:
             if node is not None:
                 node.destroy_node()
