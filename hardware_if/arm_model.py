@@ -23,12 +23,16 @@ class ArmSample(NamedTuple):
         qd: Measured joint velocities (6,).
         jaw: Measured jaw angle [rad].
         force_n: Force on the tool (3,) [N], in the base frame's axes.
+        jaw_velocity: Measured jaw velocity [rad/s].
+        jaw_effort: Jaw effort [N m] (negative: squeezing something between the jaws).
     """
 
     q: np.ndarray
     qd: np.ndarray
     jaw: float
     force_n: np.ndarray
+    jaw_velocity: float = 0.0
+    jaw_effort: float = 0.0
 
 
 class ArmModel(Protocol):

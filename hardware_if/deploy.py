@@ -44,6 +44,7 @@ import sim.envs
 from hardware_if.errors import DvrkError, HoldError
 from hardware_if.recording import Recorder
 from hardware_if.session import ros_session
+from hardware_if.task_estimate import TaskEstimate
 from policies.resolve import resolve_policy
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from psm_control.errors import ConfigurationError
@@ -135,6 +136,11 @@ class DeployOptions:
         policy_budget_s: Longest a policy step may take [s]; None: one policy period. Slower is a hold.
         live: Serve the 3-D scene for the Foxglove app on ws://127.0.0.1 at this port (0 picks one);
             None serves nothing. The recording holds the same scene either way.
+        site: The registered grasp site [m] in ``<arm>_base`` (dVRK): the task state then comes from it,
+            the goal and the jaw (:class:`~hardware_if.remote_task.RegisteredSite`), not from the task
+            topics. None: the ``/<arm>/task/*`` topics.
+        goal: Where the site must go [m] in ``<arm>_base``, with ``site``; None: the task's nominal goal
+            about the site (:func:`sim.envs.nominal_goal`).
     """
 
     policy: str
@@ -150,8 +156,16 @@ class DeployOptions:
     wait_s: float = 30.0
     policy_budget_s: float | None = None
     live: int | None = None
+    site: tuple[float, float, float] | None = None
+    goal: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
+        if self.site is not None and self.target != "dvrk":
+            raise ConfigurationError("site", self.site, "--site with --target dvrk (the simulation sees its tissue)")
+        if self.goal is not None and self.site is None:
+            raise ConfigurationError("goal", self.goal, "--goal with --site (the task topics bring their own goal)")
+        if self.site is not None:
+            TaskEstimate(np.asarray(self.site), np.asarray(self.goal if self.goal is not None else self.site))
         if self.policy_budget_s is not None and not (np.isfinite(self.policy_budget_s) and self.policy_budget_s > 0):
             raise ConfigurationError("policy_budget_s", self.policy_budget_s, "a finite number of seconds > 0")
         if self.target not in ("sim", "dvrk"):
@@ -435,7 +449,7 @@ def _deploy_dvrk(
 ) -> None:
     # These import rclpy (the ros extra), which must come after the ROS environment is set.
     from hardware_if.psm_client import PsmClient
-    from hardware_if.remote_task import RemoteTask, TaskListener
+    from hardware_if.remote_task import RegisteredSite, RemoteTask, TaskListener
 
     rate_hz = options.rate_hz if options.rate_hz is not None else 100.0
     base = options.safety_config if options.safety_config is not None else SafetyConfig()
@@ -444,7 +458,14 @@ def _deploy_dvrk(
     with ros_session(signal_handlers=False):
         client = PsmClient(options.arm, deadman_timeout_s=config.deadman_timeout_s, listen_only=options.dry_run)
         client.start()
-        listener = TaskListener(options.arm, listen_only=options.dry_run)
+        listener: TaskListener | RegisteredSite
+        if options.site is not None:
+            site = np.asarray(options.site, dtype=float)
+            goal = sim.envs.nominal_goal(options.task, site) if options.goal is None else np.asarray(options.goal)
+            listener = RegisteredSite(TaskEstimate(site, goal), client)
+            echo(f"task state: registered site {_xyz(site)}, goal {_xyz(goal)} (no task topics)")
+        else:
+            listener = TaskListener(options.arm, listen_only=options.dry_run)
         try:
             try:
                 client.wait_for_measurement(options.wait_s)
@@ -476,7 +497,7 @@ def _deploy_dvrk(
                         "not ready", f"no task topics /{options.arm}/task/site and goal in {options.wait_s:g} s"
                     )
                 after = float("-inf")
-                if not options.dry_run and listener.serves_resets():
+                if not options.dry_run and isinstance(listener, TaskListener) and listener.serves_resets():
                     # The simulated dVRK: a new scene, and only task and arm states of that scene from here on.
                     try:
                         after = listener.reset_and_wait(seed, options.wait_s)
@@ -484,6 +505,7 @@ def _deploy_dvrk(
                         raise HoldError("not ready", f"episode {episode}: {e}") from None
                     if not listener.wait(options.wait_s, after_s=after):
                         raise HoldError("not ready", f"no task state after the reset in {options.wait_s:g} s")
+                listener.new_episode()
                 # The arm must be ENABLED, homed, idle and valid before the first command of an episode.
                 reason = client.wait_ready(options.wait_s, after_s=after)
                 if reason:
@@ -598,12 +620,17 @@ def _dvrk_episode(
     entry: dict[str, Any] = {"episode": episode, "seed": seed, "steps": steps, "peak_force_n": peak}
     try:
         success, distance = view.success()
-        entry.update(success=bool(success), goal_distance_m=distance)
+        entry.update(success=bool(success), goal_distance_m=distance, success_source=view.listener.success_source)
     except Exception as e:  # no task state: not a success, say why
         entry.update(success=False, note=str(e))
     if options.dry_run:
         entry["deadman"] = client.status.reason
     return entry
+
+
+def _xyz(point: np.ndarray) -> str:
+    """A point as ``X Y Z`` in metres, as the command line takes it."""
+    return " ".join(f"{v:.4f}" for v in point)
 
 
 def _task_point(listener: Any, name: str) -> np.ndarray | None:

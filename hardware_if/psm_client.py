@@ -28,6 +28,7 @@ from hardware_if import convert
 from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
+from hardware_if.task_estimate import JawReading
 from psm_control.commands import JointCommand, MeasuredState
 from psm_control.errors import TissueRetractError
 from safety.config import SafetyConfig
@@ -85,6 +86,8 @@ class PsmClient(Node):
         self._measured_rx_s: float | None = None
         self._setpoint_q: np.ndarray | None = None
         self._jaw = 0.0
+        self._jaw_velocity = 0.0
+        self._setpoint_jaw: float | None = None
         self._force_body_n = np.zeros(3)
         self._poses: dict[str, np.ndarray] = {}
         self._frame_ids: dict[str, str] = {}
@@ -105,6 +108,7 @@ class PsmClient(Node):
         self.create_subscription(JointState, t("measured_js"), self._on_measured_js, state)
         self.create_subscription(JointState, t("setpoint_js"), self._on_setpoint_js, state)
         self.create_subscription(JointState, t("jaw/measured_js"), self._on_jaw, state)
+        self.create_subscription(JointState, t("jaw/setpoint_js"), self._on_jaw_setpoint, state)
         self.create_subscription(WrenchStamped, t("body/measured_cf"), self._on_wrench, state)
         for name in ("measured_cp", "local/measured_cp", "setpoint_cp"):
             self.create_subscription(PoseStamped, t(name), self._pose_callback(name), state)
@@ -210,8 +214,17 @@ class PsmClient(Node):
         q = self._joints(message, "jaw/measured_js", (JAW_JOINT_NAME,))
         if q is None:
             return
+        velocity = convert.joint_state_velocities(message, (JAW_JOINT_NAME,))  # checked by _joints
         with self._lock:
             self._jaw = float(q[0])
+            self._jaw_velocity = float(velocity[0])
+
+    def _on_jaw_setpoint(self, message: JointState) -> None:
+        q = self._joints(message, "jaw/setpoint_js", (JAW_JOINT_NAME,))
+        if q is None:
+            return
+        with self._lock:
+            self._setpoint_jaw = float(q[0])
 
     def _on_wrench(self, message: WrenchStamped) -> None:
         force = convert.wrench_force(message)
@@ -348,6 +361,12 @@ class PsmClient(Node):
                 stamp_s=convert.time_to_seconds(message.header.stamp),
             )
 
+    def jaw_reading(self) -> JawReading:
+        """The jaw's measured angle and velocity and its set-point (the measured angle until one arrived)."""
+        with self._lock:
+            setpoint = self._jaw if self._setpoint_jaw is None else self._setpoint_jaw
+            return JawReading(self._jaw, self._jaw_velocity, setpoint)
+
     def servo_jp(self, command: JointCommand) -> None:
         """Forward a joint set-point (and the jaw) if the deadman allows; otherwise re-send the hold."""
         self._command_publisher("servo_jp")  # a listen-only client refuses before touching the deadman
@@ -423,6 +442,17 @@ class PsmClient(Node):
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0:
                     raise DvrkTimeoutError(f"a measured_js from {self.topics.arm}", timeout_s, self._state.state)
+                self._lock.wait(remaining)
+        return self.measure()
+
+    def next_measurement(self, after_stamp_s: float, timeout_s: float) -> MeasuredState:
+        """Block until a ``measured_js`` stamped after ``after_stamp_s`` (the arm's clock) arrived; return it."""
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            while self._measured is None or convert.time_to_seconds(self._measured.header.stamp) <= after_stamp_s:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    raise DvrkTimeoutError(f"a new measured_js from {self.topics.arm}", timeout_s, self._state.state)
                 self._lock.wait(remaining)
         return self.measure()
 

@@ -1,12 +1,16 @@
-"""A task seen over ROS 2: the policy's observation assembled from CRTK topics and the task topics.
+"""A task seen over ROS 2: the policy's observation assembled from CRTK topics and a task source.
 
 :class:`RemoteTask` has the parts of a task environment a policy reads (``observation_space``,
 ``action_space``, ``config``, ``goal``, ``grasp_position()``, ``site_position()``, ``scene.grasp.holding``),
 so the simulation's scripted expert and trained checkpoints run unchanged against a dVRK. The arm's
 part comes from the arm's own topics (``measured_cp``, ``jaw/measured_js``, ``body/measured_cf`` via
-:class:`~hardware_if.psm_client.PsmClient`); the grasp site, the goal and the grasped flag come from
-``/<arm>/task/*`` (:data:`~hardware_if.sim_task.TASK_TOPICS`): the simulated dVRK publishes them, on a
-robot a perception node does.
+:class:`~hardware_if.psm_client.PsmClient`). The grasp site, the goal, the achieved goal and the grasped
+flag come from one of two task sources:
+
+- :class:`RegisteredSite`: a site the operator registered, a goal, and the jaw's own topics
+  (:mod:`hardware_if.task_estimate`); no perception stack needed;
+- :class:`TaskListener`: ``/<arm>/task/*`` (:data:`~hardware_if.sim_task.TASK_TOPICS`), which the
+  simulated dVRK publishes and a perception node would on a robot.
 """
 
 from __future__ import annotations
@@ -28,9 +32,11 @@ import sim.envs
 from hardware_if.crtk import periodic_qos
 from hardware_if.errors import DvrkTimeoutError
 from hardware_if.psm_client import PsmClient
+from hardware_if.registration import console_base_frame, grasp_point
 from hardware_if.sim_task import task_topic
+from hardware_if.task_estimate import TaskEstimate
 
-__all__ = ["RemoteTask", "TaskListener"]
+__all__ = ["RegisteredSite", "RemoteTask", "TaskListener"]
 
 
 class TaskListener(Node):
@@ -40,6 +46,9 @@ class TaskListener(Node):
         arm: Arm name.
         listen_only: Create no ``task/reset`` publisher (a dry run changes nothing).
     """
+
+    #: What a deploy's success is judged by.
+    success_source = "task topics"
 
     def __init__(self, arm: str, *, listen_only: bool = False) -> None:
         super().__init__(f"{arm.lower()}_task_listener_{time.monotonic_ns() % 100000}")
@@ -89,6 +98,12 @@ class TaskListener(Node):
     def _on_grasped(self, message: Bool) -> None:
         with self._lock:
             self._grasped = bool(message.data)
+
+    def refresh(self, grasp_position: np.ndarray) -> None:
+        """Nothing to do: the topics bring the task state."""
+
+    def new_episode(self) -> None:
+        """Nothing to forget: the topics bring the new episode's state."""
 
     def point(self, name: str) -> np.ndarray:
         """The latest ``site``, ``goal`` or ``achieved_goal`` [m] in ``<arm>_base``."""
@@ -165,18 +180,65 @@ class TaskListener(Node):
         self.close()
 
 
+class RegisteredSite:
+    """The task state from a registered site, a goal and the jaw (no ``/<arm>/task/*`` topic).
+
+    Has the task source interface :class:`RemoteTask` and the deploy read (as :class:`TaskListener`).
+
+    Args:
+        estimate: The registration and goal, and the grasp sensing.
+        client: The arm, whose ``jaw/measured_js`` and ``jaw/setpoint_js`` show a grasp.
+    """
+
+    #: What a deploy's success is judged by: an estimate, not a measurement of the tissue.
+    success_source = "estimate (the registered site moved with the jaws)"
+
+    def __init__(self, estimate: TaskEstimate, client: PsmClient) -> None:
+        self.estimate, self.client = estimate, client
+
+    def refresh(self, grasp_position: np.ndarray) -> None:
+        """Take the jaw's latest reading and the grasp point [m] in ``<arm>_base``."""
+        self.estimate.update(self.client.jaw_reading(), grasp_position)
+
+    def point(self, name: str) -> np.ndarray:
+        """The estimated ``site``, ``goal`` or ``achieved_goal`` [m] in ``<arm>_base``."""
+        points = {"site": self.estimate.site, "goal": self.estimate.goal, "achieved_goal": self.estimate.achieved_goal}
+        return np.asarray(points[name]).copy()
+
+    @property
+    def grasped(self) -> bool:
+        """The jaw has stalled on tissue."""
+        return self.estimate.grasped
+
+    def wait(self, timeout_s: float, *, after_s: float = float("-inf")) -> bool:
+        """Always ready: the registration does not arrive, it is given."""
+        return True
+
+    def serves_resets(self) -> bool:
+        """A registered scene is the real one: nothing to reset."""
+        return False
+
+    def new_episode(self) -> None:
+        """Nothing held at the start of an episode."""
+        self.estimate.reset()
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
 class RemoteTask:
     """The policy's view of a task over ROS 2 (see the module docstring).
 
     Args:
         task: Task id; its spaces and action scaling come from the task's simulation config.
         client: The arm.
-        listener: The task topics.
+        listener: The task source (:class:`TaskListener` or :class:`RegisteredSite`).
     """
 
-    def __init__(self, task: str, client: PsmClient, listener: TaskListener) -> None:
+    def __init__(self, task: str, client: PsmClient, listener: TaskListener | RegisteredSite) -> None:
         env = sim.envs.make(task)
         try:
+            self.spec = env.spec  # the task's Gymnasium id names its shipped policy ("pretrained")
             self.observation_space = env.observation_space
             self.action_space = env.action_space
             self.config = env.unwrapped.config
@@ -205,16 +267,11 @@ class RemoteTask:
 
     def base_frame(self) -> np.ndarray:
         """Pose of the RCM in ``<arm>_base`` from ``measured_cp`` and ``local/measured_cp`` (4x4)."""
-        measured, _ = self.client.pose("measured_cp")
-        local, _ = self.client.pose("local/measured_cp")
-        return np.asarray(measured @ np.linalg.inv(local))
+        return console_base_frame(self.client)
 
     def grasp_position(self) -> np.ndarray:
         """The point midway along the jaws [m] in ``<arm>_base``, by kinematics from the measured joints."""
-        measured = self.client.measure()
-        self._configuration.set_base_frame(self.base_frame())
-        self._configuration.update(measured.q, measured.jaw)
-        return np.asarray(self._configuration.grasp_position())
+        return grasp_point(self.client, self._configuration)
 
     def site_position(self) -> np.ndarray:
         """The grasp site [m] in ``<arm>_base``."""
@@ -230,6 +287,7 @@ class RemoteTask:
         measured = self.client.measure()
         pose, _ = self.client.pose("measured_cp")
         tip = pose[:3, 3]
+        self.listener.refresh(self.grasp_position())
         site = self.site_position()
         quaternion = np.asarray(pin.Quaternion(pose[:3, :3]).coeffs())  # x, y, z, w
         vector = np.concatenate(

@@ -631,7 +631,11 @@ class SimulatedPsm(Node):
         self._pub["setpoint_js"].publish(
             convert.joint_state(JOINT_NAMES, self._setpoint_q, effort=self._setpoint_effort, stamp_s=stamp)
         )
-        self._pub["jaw/measured_js"].publish(convert.joint_state((JAW_JOINT_NAME,), [sample.jaw], stamp_s=stamp))
+        self._pub["jaw/measured_js"].publish(
+            convert.joint_state(
+                (JAW_JOINT_NAME,), [sample.jaw], [sample.jaw_velocity], [sample.jaw_effort], stamp_s=stamp
+            )
+        )
         self._pub["jaw/setpoint_js"].publish(
             convert.joint_state((JAW_JOINT_NAME,), [self._setpoint_jaw], stamp_s=stamp)
         )

@@ -8,13 +8,20 @@ which hands the physics the console's latest set-point on every tick (the enviro
 ignored), so the simulation's physics, grasp and tissue-force code run unchanged.
 
 A policy also needs the grasp site, the goal and whether the jaw holds the tissue. On a real dVRK a
-perception node supplies them; here :class:`TaskTopics` publishes the simulation's ground truth on
-extra, simulation-only topics under ``/<arm>/task/`` (see :data:`TASK_TOPICS`).
+perception node supplies them, or an operator's registration and the jaw
+(:mod:`hardware_if.task_estimate`). Here :class:`TaskTopics` publishes the simulation's ground truth on
+extra, simulation-only topics under ``/<arm>/task/`` (see :data:`TASK_TOPICS`); a ``blind`` arm serves no
+such topic and reports its jaw as a real one on tissue: stalled open on the held flap
+(:meth:`sim.grasp.GraspParams.measured_jaw`), with a squeezing effort. :class:`TruthLog` writes the ground
+truth to a file instead, to score a blind run.
 """
 
 from __future__ import annotations
 
-from typing import Any
+import json
+import time
+from pathlib import Path
+from typing import IO, Any
 
 import numpy as np
 
@@ -25,10 +32,21 @@ from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, Me
 from safety.config import SafetyConfig
 from sim.scene import PhysicsParams
 
-__all__ = ["TASK_PHYSICS_PERIOD_S", "TASK_TOPICS", "SetpointFollower", "TaskArm", "TaskTopics", "task_arm_model"]
+__all__ = [
+    "JAW_LEVER_M",
+    "TASK_PHYSICS_PERIOD_S",
+    "TASK_TOPICS",
+    "SetpointFollower",
+    "TaskArm",
+    "TaskTopics",
+    "TruthLog",
+    "task_arm_model",
+]
 
 #: Physics step of the served scene [s]: two 1/240 s substeps, the simulation's stable cloth step.
 TASK_PHYSICS_PERIOD_S = 1.0 / 120.0
+#: Distance of the grasp point from the jaw's pivot [m]: half the Large Needle Driver's jaw.
+JAW_LEVER_M = 0.005
 #: Simulation-only topics under ``/<arm>/task/`` (a perception node's job on a real robot).
 TASK_TOPICS = {
     "site": "geometry_msgs/PointStamped: the grasp site on the flap, in <arm>_base [m]",
@@ -83,11 +101,15 @@ class TaskArm:
         seed: Seed of the first episode (randomization of the flap, the RCM, ...).
         max_steps_per_call: Most physics steps one :meth:`step` runs; when the host cannot keep up,
             the simulation runs slower than the wall clock instead of falling ever further behind.
+        blind: Report the jaw as a real one on tissue (stalled open on the held flap) for a client
+            that senses the grasp with it.
     """
 
     instantaneous = False
 
-    def __init__(self, task: str, *, seed: int = 0, max_steps_per_call: int = 6) -> None:
+    def __init__(self, task: str, *, seed: int = 0, max_steps_per_call: int = 6, blind: bool = False) -> None:
+        self.blind = blind
+        self._jaw = 0.0
         physics = PhysicsParams(substeps=2, control_period_s=TASK_PHYSICS_PERIOD_S)
         self.env: Any = sim.envs.make(task, physics=physics).unwrapped
         self.task = task
@@ -111,6 +133,27 @@ class TaskArm:
         self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
         self._info = {**self._info, "grasped": False}
 
+    def settle(self, *, tolerance_m: float = 1e-4, window_s: float = 0.25, max_s: float = 10.0) -> float:
+        """Run the physics with the arm still until the site moves less than ``tolerance_m`` in ``window_s``.
+
+        The flap keeps sagging for a moment after a reset; an operator registers it at rest.
+
+        Returns:
+            The simulated time it took [s] (about ``max_s`` if it never came to rest).
+        """
+        steps_per_window = max(1, round(window_s / self.step_s))
+        site = np.asarray(self.env.site_position(), dtype=float)
+        elapsed = 0.0
+        while elapsed < max_s:
+            for _ in range(steps_per_window):
+                self.step(self.step_s)
+            elapsed += steps_per_window * self.step_s
+            now = np.asarray(self.env.site_position(), dtype=float)
+            moved, site = float(np.linalg.norm(now - site)), now
+            if moved < tolerance_m:
+                break
+        return elapsed
+
     @property
     def base_frame(self) -> np.ndarray:
         """Pose of the RCM in the world (= ``<arm>_base``) for the current episode (4x4)."""
@@ -122,12 +165,13 @@ class TaskArm:
         return np.asarray(self.env.model.home(), dtype=float)
 
     def task_state(self) -> dict[str, Any]:
-        """Ground truth a perception node would supply: site, goal, achieved goal [m], grasped."""
+        """Ground truth a perception node would supply: site, goal, achieved goal [m], grasped; the grasp point."""
         return {
             "site": np.asarray(self.env.site_position(), dtype=float),
             "goal": np.asarray(self.env.goal, dtype=float),
             "achieved_goal": self._achieved.copy(),
             "grasped": bool(self.env.scene.grasp.holding),
+            "grasp_point": np.asarray(self.env.grasp_position(), dtype=float),
         }
 
     def scene_markers(self) -> dict[str, Any]:
@@ -169,12 +213,22 @@ class TaskArm:
             self._debt_s = min(self._debt_s, self.step_s)  # behind the wall clock: slow down, do not pile up
         if steps:
             self._qd = (np.asarray(self.env.backend.q, dtype=float) - before) / (steps * self.step_s)
-        return self._sample()
+        return self._sample(steps * self.step_s)
 
-    def _sample(self) -> ArmSample:
+    def _sample(self, dt_s: float = 0.0) -> ArmSample:
         backend = self.env.backend
         force = np.asarray(self._info.get("force_n", np.zeros(3)), dtype=float)
-        return ArmSample(np.asarray(backend.q, dtype=float).copy(), self._qd.copy(), float(backend.jaw), force)
+        jaw, velocity, effort = float(backend.jaw), 0.0, 0.0
+        if self.blind:
+            grasp = self.env.config.grasp
+            holding = bool(self.env.scene.grasp.holding)
+            jaw = grasp.measured_jaw(backend.jaw, holding)
+            velocity = (jaw - self._jaw) / dt_s if dt_s > 0 else 0.0
+            # The servo squeezing the flap: the pinch force at the grasp point, half a jaw (5 mm) from the pivot.
+            effort = -grasp.pinch_force_n * JAW_LEVER_M if holding else 0.0
+        self._jaw = jaw
+        q = np.asarray(backend.q, dtype=float).copy()
+        return ArmSample(q, self._qd.copy(), jaw, force, velocity, effort)
 
     def close(self) -> None:
         """Release the physics client."""
@@ -231,6 +285,41 @@ class TaskTopics:
         self._grasped.publish(self._bool(data=state["grasped"]))
         # Last, after the state of the same period: a client that sees the count sees the new scene next.
         self._resets_pub.publish(self._int(data=self._resets))
+
+
+class TruthLog:
+    """Writes a :class:`TaskArm`'s ground truth as JSON lines, to score a run that could not see it.
+
+    One line per policy period (the task's environment step): ``t`` [s since the log opened], ``grasped``,
+    ``site``, ``achieved_goal``, ``goal``, ``grasp_point`` [m] in ``<arm>_base`` and ``distance_m`` (achieved
+    goal to goal). Each line is flushed as written, so a killed server leaves every line but the last.
+
+    Args:
+        node: The node whose timer writes (the simulated console).
+        arm_model: The task scene.
+        path: The file (replaced).
+    """
+
+    def __init__(self, node: Any, arm_model: TaskArm, path: Path) -> None:
+        self.arm_model = arm_model
+        self._file: IO[str] = path.open("w", buffering=1)
+        self._start_s = time.monotonic()
+        node.create_timer(PhysicsParams().step_s, self.write)
+
+    def write(self) -> None:
+        """Write the current truth as one line."""
+        state = self.arm_model.task_state()
+        line = {
+            "t": time.monotonic() - self._start_s,
+            "grasped": state["grasped"],
+            **{name: [float(v) for v in state[name]] for name in ("site", "achieved_goal", "goal", "grasp_point")},
+            "distance_m": float(np.linalg.norm(state["achieved_goal"] - state["goal"])),
+        }
+        self._file.write(json.dumps(line) + "\n")
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
 
 
 def task_arm_model(task: str, seed: int = 0) -> TaskArm:

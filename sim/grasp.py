@@ -31,22 +31,32 @@ class GraspParams:
         pinch_force_n: Jaw pinch force [N]; bowel needs about 3 N of pinch to hold a 5 N pull
             (Heijnsdijk et al. 2004).
         close_below_rad: The jaw counts as closed below this opening angle [rad].
+        stall_rad: The angle at which a real jaw closing on the held flap stops [rad]: the jaws grip
+            at ``close_below_rad`` and squeeze the thin flap a little further. The kinematic jaw of
+            the simulation closes through it; :meth:`measured_jaw` reports what a real jaw would.
     """
 
     radius_m: float = 0.010
     friction: float = 0.5
     pinch_force_n: float = 4.0
     close_below_rad: float = 0.15
+    stall_rad: float = 0.12
 
     @property
     def capacity_n(self) -> float:
         """Largest pull the grip holds [N]."""
         return self.friction * self.pinch_force_n
 
+    def measured_jaw(self, jaw_rad: float, holding: bool) -> float:
+        """The jaw angle a real jaw's encoder reads for a commanded ``jaw_rad`` [rad]: stalled on held tissue."""
+        return max(float(jaw_rad), self.stall_rad) if holding else float(jaw_rad)
+
     def __post_init__(self) -> None:
         for name in ("radius_m", "friction", "pinch_force_n", "close_below_rad"):
             if not getattr(self, name) > 0:
                 raise ConfigurationError(name, getattr(self, name), "a positive number")
+        if not 0 <= self.stall_rad < self.close_below_rad:
+            raise ConfigurationError("stall_rad", self.stall_rad, f"an angle in [0, {self.close_below_rad:g}) rad")
 
 
 class GraspEvents(NamedTuple):

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from psm_control.errors import UnknownVariantError
 from sim.envs.base import EnvConfig, TissueRetractEnv
@@ -22,6 +23,7 @@ __all__ = [
     "TargetEnv",
     "TissueRetractEnv",
     "make",
+    "nominal_goal",
     "register",
 ]
 
@@ -61,3 +63,18 @@ def make(task: str, **kwargs: Any) -> Any:
     """``gym.make`` for a task given by any of its names."""
     register()
     return gym.make(gym_id(task), **kwargs)
+
+
+def nominal_goal(task: str, site_position: np.ndarray) -> np.ndarray:
+    """The goal a task sets for a site when none is given: the middle of its goal range [m].
+
+    Raises:
+        UnknownVariantError: The task's goal is not a place (``expose``: a fraction of exposed tissue).
+    """
+    env_id = gym_id(task)
+    cls = next(cls for known, cls in TASKS.values() if known == env_id)
+    goal = cls.nominal_goal(site_position)
+    if goal is None:
+        places = [name for name, (_, c) in TASKS.items() if c.nominal_goal(np.zeros(3)) is not None]
+        raise UnknownVariantError("task with a goal position", task, places)
+    return goal

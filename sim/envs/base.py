@@ -123,6 +123,11 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     def _achieved_goal(self) -> np.ndarray:
         return self.site_position()
 
+    @classmethod
+    def nominal_goal(cls, site_position: np.ndarray) -> np.ndarray | None:
+        """The middle of the task's goal range for a site [m] (None: the goal is not a place)."""
+        return None
+
     # ----------------------------------------------------------------- Gymnasium API
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

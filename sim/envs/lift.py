@@ -16,3 +16,8 @@ class LiftEnv(TissueRetractEnv):
 
     def _sample_goal(self, rng: np.random.Generator, site_position: np.ndarray) -> np.ndarray:
         return site_position + np.array([0.0, 0.0, rng.uniform(*self.lift_range_m)])
+
+    @classmethod
+    def nominal_goal(cls, site_position: np.ndarray) -> np.ndarray:
+        """The site lifted by the middle of the lift range."""
+        return np.asarray(site_position, dtype=float) + np.array([0.0, 0.0, float(np.mean(cls.lift_range_m))])

@@ -18,3 +18,8 @@ class TargetEnv(TissueRetractEnv):
 
     def _sample_goal(self, rng: np.random.Generator, site_position: np.ndarray) -> np.ndarray:
         return site_position + rng.uniform(TARGET_LOW_M, TARGET_HIGH_M)
+
+    @classmethod
+    def nominal_goal(cls, site_position: np.ndarray) -> np.ndarray:
+        """The site moved to the middle of the target box."""
+        return np.asarray(site_position, dtype=float) + 0.5 * (TARGET_LOW_M + TARGET_HIGH_M)

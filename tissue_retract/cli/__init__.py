@@ -30,6 +30,7 @@ SUBCOMMANDS: dict[str, str] = {
     "robustness": "randomized robustness evaluation of a policy",
     "tune-safety": "sweep safety limits and recommend a configuration",
     "reproduce": "train and evaluate the paper's Tables 1 and 2",
+    "register": "register the grasp site by holding the jaws on it (for deploy --site)",
     "sim-dvrk": "serve the dVRK's CRTK topics from the simulation",
     "replay": "summarise and plot a recorded run",
     "bench": "measure speed (env, chain, ros) and run the fault matrix (faults)",

@@ -3,8 +3,16 @@
 POLICY is ``scripted``, ``random``, ``module:callable`` or a checkpoint path, as for ``evaluate``.
 ``--target sim`` runs the task's PyBullet environment; ``--target dvrk`` drives the arm's CRTK topics
 over ROS 2 with the same chain (``tissue-retract sim-dvrk --task ID`` serves a simulated one). The
-observation is assembled from ``measured_cp``, ``jaw/measured_js``, ``body/measured_cf`` and the
-``/<arm>/task/*`` topics (site, goal, grasped: simulation-only, a perception node's job on a robot).
+observation is assembled from ``measured_cp``, ``jaw/measured_js``, ``body/measured_cf`` and a task source:
+
+- ``--site X Y Z`` (or ``--registration FILE`` from ``tissue-retract register``): no perception needed. The
+  site is where the operator registered it, the goal is ``--goal X Y Z`` or the task's nominal goal about
+  the site, the grasp is sensed by the jaw stalling on tissue (``jaw/measured_js`` vs ``jaw/setpoint_js``),
+  and while grasped the site moves with the jaws (:mod:`hardware_if.task_estimate`). No task topic is read;
+  success is then an estimate (``sim-dvrk --blind --truth FILE`` scores it).
+- ``--task-topics`` (the default without ``--site``): ``/<arm>/task/{site,goal,achieved_goal,grasped}``,
+  from a perception node, or from ``sim-dvrk`` without ``--blind``.
+
 An arm that is not ENABLED and homed is enabled and homed first (not in a dry run).
 
 ``--dry-run`` (dVRK) listens to the live arm and computes, logs and records every command but creates
@@ -39,6 +47,7 @@ from pathlib import Path
 
 from hardware_if.deploy import DeployOptions, deploy
 from hardware_if.network import apply_local_ros_env, environment_domain_id
+from hardware_if.registration import read_registration
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from safety.config import MAX_CONTROL_RATE_HZ, MIN_CONTROL_RATE_HZ, load_safety_config
@@ -64,6 +73,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dry-run", action="store_true", help="compute and record, publish nothing on motion topics")
     parser.add_argument("--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml)")
     parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument(
+        "--site",
+        type=float_in(-1.0, 1.0),
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        default=None,
+        help="dvrk: the registered grasp site [m] in <arm>_base; the task state comes from it and the jaw",
+    )
+    source.add_argument(
+        "--registration", metavar="FILE", default=None, help="dvrk: the site from `tissue-retract register --out FILE`"
+    )
+    source.add_argument(
+        "--task-topics",
+        action="store_true",
+        help="dvrk: site, goal and grasp from /<arm>/task/* (a perception node); the default without --site",
+    )
+    parser.add_argument(
+        "--goal",
+        type=float_in(-1.0, 1.0),
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        default=None,
+        help="with --site/--registration: where the site must go [m] in <arm>_base (default: the task's nominal goal)",
+    )
     add_live_argument(parser)
     parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=1, help="episodes (default: 1)")
     parser.add_argument(
@@ -110,6 +144,9 @@ def run(args: argparse.Namespace) -> int:
         safety_config = load_safety_config(args.safety_config)
     record = Path(args.record) if args.record else Path("runs") / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
     check_output_path(record, "--record", (args.policy, args.safety_config))
+    site = args.site
+    if args.registration is not None:
+        site = read_registration(args.registration, args.arm)
     options = DeployOptions(
         policy=args.policy,
         target=args.target,
@@ -124,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
         wait_s=args.wait,
         policy_budget_s=args.policy_budget,
         live=args.live,
+        site=None if site is None else tuple(site),
+        goal=None if args.goal is None else tuple(args.goal),
     )
     report = deploy(options, echo=lambda line: print(line, flush=True))
     for line in report.lines():

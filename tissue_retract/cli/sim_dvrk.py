@@ -9,6 +9,13 @@ With ``--task ID`` the arm moves in that task's PyBullet tissue scene: the tissu
 comes from the scene, not ``--base-xyz``), homing goes to the task's start joints, and the
 simulation-only topics ``/<arm>/task/{site,goal,achieved_goal,grasped}`` carry what a perception node
 would supply on a real robot (``/<arm>/task/reset`` with a seed starts a new episode).
+
+``--blind`` serves only what the dVRK console serves (no ``/<arm>/task/*`` topic: one scene, no resets),
+prints ``site: X Y Z`` and ``goal: X Y Z`` (metres, ``<arm>_base``) at start as an operator would register
+and set them for ``deploy --site ... --goal ...``, and reports the jaw as a real one on tissue: closing
+on the flap it stalls open (0.12 rad) with a squeezing effort on ``jaw/measured_js``. ``--truth FILE``
+writes the scene's true state as JSON lines at the policy rate (``t``, ``grasped``, ``site``,
+``achieved_goal``, ``goal``, ``grasp_point``, ``distance_m``), to score a blind deploy.
 Needs the ``ros`` extra. Ctrl-C stops it.
 """
 
@@ -22,7 +29,9 @@ import numpy as np
 
 from hardware_if.network import apply_local_ros_env, environment_domain_id
 from hardware_if.session import require_ros, ros_session
-from hardware_if.sim_task import TaskArm, TaskTopics
+from hardware_if.sim_task import TaskArm, TaskTopics, TruthLog
+from psm_control.errors import ConfigurationError
+from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
 from sim.scene3d import PsmScene
 from sim.scene_stream import LiveScene, SceneStream
@@ -50,6 +59,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar=("X", "Y", "Z"),
         help="position of the RCM in <arm>_base [m], as set_base_frame would set it (default: 0 0 0)",
     )
+    parser.add_argument(
+        "--blind",
+        action="store_true",
+        help="with --task: no task topics; print the site and goal; the jaw stalls on the held flap",
+    )
+    parser.add_argument(
+        "--truth", metavar="FILE.jsonl", default=None, help="with --task: write the true task state as JSON lines"
+    )
     add_live_argument(parser)
 
 
@@ -58,13 +75,16 @@ def run(args: argparse.Namespace) -> int:
     # Read by rclpy and Fast DDS when they start, so set before the first import of rclpy.
     apply_local_ros_env(args.domain_id)
 
+    if (args.blind or args.truth) and args.task is None:
+        raise ConfigurationError("--blind/--truth", True, "with --task ID (they are about a task's scene)")
+    truth_path = check_output_path(args.truth, "--truth") if args.truth else None
     require_ros()
     # The ros extra, imported after the environment it reads is set.
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     from hardware_if.sim_dvrk import SimulatedPsm
 
-    task = TaskArm(args.task, seed=args.seed) if args.task is not None else None
+    task = TaskArm(args.task, seed=args.seed, blind=args.blind) if args.task is not None else None
     base_frame = np.eye(4)
     base_frame[:3, 3] = args.base_xyz
     home_q = None
@@ -77,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, signal.default_int_handler)
     with live_view as live, ros_session(signal_handlers=False):
         node: SimulatedPsm | None = None
+        truth: TruthLog | None = None
         # Ctrl-C may come at any point once the start-up line is out (a client waits for it), even
         # before spin() starts: all of it ends the server cleanly.
         try:
@@ -91,7 +112,15 @@ def run(args: argparse.Namespace) -> int:
             # Made before the start-up line: a Ctrl-C right after it must not land in its constructor.
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            if task is not None:
+            if truth_path is not None and task is not None:
+                truth = TruthLog(node, task, truth_path)
+            if task is not None and args.blind:
+                task.settle()  # the site an operator would register: the flap at rest
+                state = task.task_state()
+                for name in ("site", "goal"):
+                    print(f"{name}: " + " ".join(f"{v:.5f}" for v in state[name]), flush=True)
+                node.get_logger().info(f"task {args.task!r} scene (seed {args.seed}), blind: no task topics")
+            elif task is not None:
                 TaskTopics(node, task)
                 node.get_logger().info(
                     f"task {args.task!r} scene (seed {args.seed}); task topics under /{args.arm}/task/"
@@ -105,6 +134,8 @@ def run(args: argparse.Namespace) -> int:
         finally:
             if node is not None:
                 node.destroy_node()
+            if truth is not None:
+                truth.close()
             if task is not None:
                 task.close()
     return 0

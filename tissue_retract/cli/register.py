@@ -1,0 +1,73 @@
+"""``tissue-retract register``: record the grasp site by touch, for ``deploy --site`` on a robot without perception.
+
+Hold the closed jaws on the site (the arm in its clutch or free mode, or moved there by teleoperation) and
+run ``tissue-retract register --arm PSM1``: it listens to the arm (it commands nothing), averages the grasp
+point (midway along the jaws, by the arm's kinematics) over ``--samples`` measurements, refuses if the tool
+moved more than 1 mm meanwhile, and prints ``site: X Y Z`` in metres in ``<arm>_base``. ``--out FILE``
+also writes it as JSON for ``deploy --registration FILE``. Discovery stays on localhost unless
+``--network`` is given, as for ``deploy``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from hardware_if.network import apply_local_ros_env, environment_domain_id
+from psm_control.inputs import check_output_path
+from tissue_retract.cli._checks import float_in, int_in
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
+    parser.add_argument("--arm", default="PSM1", help="arm name / topic namespace (default: PSM1)")
+    parser.add_argument(
+        "--samples", type=int_in(5, 10_000), default=50, help="measurements averaged, 5-10000 (default: 50)"
+    )
+    parser.add_argument("--out", metavar="FILE.json", default=None, help="also write the registration as JSON")
+    parser.add_argument(
+        "--wait",
+        type=float_in(0.0, 3600.0, open_low=True),
+        default=10.0,
+        help="seconds to wait for each measurement of the arm (default: 10)",
+    )
+    parser.add_argument(
+        "--domain-id",
+        type=int_in(0, 232),
+        default=environment_domain_id(),
+        help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID or 0)",
+    )
+    parser.add_argument(
+        "--network", action="store_true", help="keep your ROS discovery settings instead of localhost-only"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Register, print ``site: X Y Z``; 0, or 1 with the reason when the tool was not still or the arm silent."""
+    output = check_output_path(args.out, "--out") if args.out else None
+    if args.network:
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    else:
+        apply_local_ros_env(args.domain_id)  # before rclpy starts
+    # The ros extra, imported after the environment it reads is set.
+    from hardware_if.psm_client import PsmClient
+    from hardware_if.registration import RegistrationError, register_site
+    from hardware_if.session import ros_session
+
+    with ros_session(), PsmClient(args.arm, listen_only=True, node_name=f"{args.arm.lower()}_register") as client:
+        print(f"{args.arm}: hold the closed jaws still on the site", flush=True)
+        try:
+            registration = register_site(client, samples=args.samples, timeout_s=args.wait)
+        except RegistrationError as e:
+            print(f"tissue-retract register: error: {e}", file=sys.stderr)
+            return 1
+    print(registration.line())
+    print(f"  frame {args.arm}_base [m], {registration.samples} samples within {registration.spread_m * 1000:.3f} mm")
+    if output is not None:
+        output.write_text(json.dumps(registration.to_dict(), indent=2) + "\n")
+        print(f"  written to {output}")
+    return 0
