@@ -249,6 +249,7 @@ class PsmClient(Node):
             with self._lock:
                 self._poses[name] = pose
                 self._frame_ids[name] = message.header.frame_id
+                self._lock.notify_all()
 
         return callback
 
@@ -446,13 +447,23 @@ class PsmClient(Node):
         return self.measure()
 
     def next_measurement(self, after_stamp_s: float, timeout_s: float) -> MeasuredState:
-        """Block until a ``measured_js`` stamped after ``after_stamp_s`` (the arm's clock) arrived; return it."""
+        """Block until a ``measured_js`` stamped after ``after_stamp_s`` (the arm's clock) arrived; return it.
+
+        Also waits for a first ``measured_cp`` and ``local/measured_cp``, which :meth:`pose` then has.
+        """
         deadline = time.monotonic() + timeout_s
+
+        def arrived() -> bool:
+            message = self._measured
+            fresh = message is not None and convert.time_to_seconds(message.header.stamp) > after_stamp_s
+            return fresh and all(name in self._poses for name in ("measured_cp", "local/measured_cp"))
+
         with self._lock:
-            while self._measured is None or convert.time_to_seconds(self._measured.header.stamp) <= after_stamp_s:
+            while not arrived():
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0:
-                    raise DvrkTimeoutError(f"a new measured_js from {self.topics.arm}", timeout_s, self._state.state)
+                    what = f"a new measured_js and the measured_cp poses from {self.topics.arm}"
+                    raise DvrkTimeoutError(what, timeout_s, self._state.state)
                 self._lock.wait(remaining)
         return self.measure()
 

@@ -402,7 +402,34 @@ def _cases(tmp: Path) -> list[Case]:
         )
     )
     cases.append(Case("policy-unimportable", (*EVALUATE, "--policy", "no_such_module:act"), ("--policy", "importable")))
+    cases += _blind_cases(tmp)
     return cases
+
+
+def _blind_cases(tmp: Path) -> list[Case]:
+    """A registered site and the blind simulation: where each belongs and what a site is."""
+    record = tmp / "blind" / "r.mcap"
+    deploy = ("deploy", "--policy", "scripted", "--record", str(record))
+    registration = _write(tmp / "registration.json", "not json\n")
+    other_arm = _write(tmp / "psm2.json", '{"arm": "PSM2", "site_m": [0, 0, 0.02]}\n')
+    return [
+        Case("site-in-sim", (*deploy, "--target", "sim", "--site", "0", "0", "0.02"), ("site", "--target dvrk")),
+        Case("site-nan", (*deploy, "--target", "dvrk", "--site", "nan", "0", "0"), ("--site", "nan", "[-1, 1]")),
+        Case("goal-without-site", (*deploy, "--target", "dvrk", "--goal", "0", "0", "0.04"), ("goal", "--site")),
+        Case(
+            "registration-garbage",
+            (*deploy, "--target", "dvrk", "--registration", str(registration)),
+            ("--registration", "register --out"),
+        ),
+        Case(
+            "registration-other-arm",
+            (*deploy, "--target", "dvrk", "--registration", str(other_arm)),
+            ("--registration", "PSM1", "PSM2"),
+        ),
+        Case("blind-expose", (*EVALUATE[:1], "--policy", "scripted", "--task", "expose", "--blind"), ("task", "I-III")),
+        Case("blind-without-task", ("sim-dvrk", "--blind"), ("--blind", "--task")),
+        Case("register-few-samples", ("register", "--samples", "2"), ("--samples", "[5, 10000]")),
+    ]
 
 
 def _symlink(path: Path, target: str) -> Path:

@@ -5,6 +5,12 @@ observation dict and returning an action) or a checkpoint path (loaded by ``poli
 Episode seeds are ``S * 100000 + i`` for each ``--seeds`` S and episode i. Every action goes through
 the control chain; ``--safety-config FILE`` (TOML/YAML, as ``tissue-retract safety show``) sets its
 limits, for example ``force_limit_n``; ``--no-safety`` is the ablation without the filter.
+
+``--blind`` evaluates the policy as a robot with no perception stack runs it (``deploy --site``): its
+observation carries a site registered ``--registration-error-mm`` (default 2) from the true one in a random
+direction, the episode's goal, a grasp sensed by the jaw stalling on the flap and a site that moves with the
+jaws (:class:`hardware_if.registered_env.RegisteredTask`); success is still the true site's distance. The
+scripted expert reads the simulation itself, so ``--blind`` is for checkpoints and ``module:callable``.
 """
 
 from __future__ import annotations
@@ -21,12 +27,13 @@ from rich.console import Console
 from rich.table import Table
 
 import sim.envs
+from hardware_if.registered_env import RegisteredTask
 from policies.resolve import resolve_policy
 from psm_control.inputs import check_output_path
 from safety.config import load_safety_config
 from sim.evaluation import EpisodeResult, PolicyError, run_episode, summarize, timed
 from sim.scene_stream import LiveScene, StreamScene
-from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, int_in
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
@@ -45,6 +52,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml), e.g. force_limit_n"
     )
     parser.add_argument("--json", metavar="FILE", default=None, help="write {summary, episodes} as JSON")
+    parser.add_argument(
+        "--blind",
+        action="store_true",
+        help="Tasks I-III: observe a registered site and a jaw-sensed grasp instead of the simulation's truth",
+    )
+    parser.add_argument(
+        "--registration-error-mm",
+        type=float_in(0.0, 50.0),
+        default=2.0,
+        metavar="MM",
+        help="with --blind: the registered site's distance from the true one [mm] (default: 2)",
+    )
     add_live_argument(parser)
     parser.add_argument(
         "--allow-other-task", action="store_true", help="run a checkpoint trained for another task (same spaces)"
@@ -75,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
     if args.no_safety:
         console.print("[bold red]ABLATION: safety filter OFF[/] - commands reach the joints unfiltered")
     env = sim.envs.make(args.task, safety=not args.no_safety, safety_config=safety_config)
+    if args.blind:
+        env = RegisteredTask(env, registration_error_m=args.registration_error_mm / 1000.0)
     live = None
     if args.live is not None:
         live = LiveScene(port=args.live)
@@ -119,8 +140,12 @@ def run(args: argparse.Namespace) -> int:
         controller=controller,
         safety=not args.no_safety,
         force_limit_n=force_limit_n,
+        blind=args.blind,
     )
-    table = Table(title=f"{args.policy} on {summary['task']} ({summary['episodes']} episodes, {controller})")
+    if args.blind:
+        summary["registration_error_mm"] = args.registration_error_mm
+    blind = f", blind: site registered {args.registration_error_mm:g} mm off" if args.blind else ""
+    table = Table(title=f"{args.policy} on {summary['task']} ({summary['episodes']} episodes, {controller}{blind})")
     table.add_column("metric")
     table.add_column("value", justify="right")
     table.add_row("success rate", f"{summary['success_rate']:.3f} +- {summary['ci95']:.3f}")

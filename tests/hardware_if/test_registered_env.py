@@ -1,0 +1,57 @@
+"""RegisteredTask: the simulation observed as a robot without perception observes it."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+import sim.envs
+from hardware_if.registered_env import RegisteredTask
+from sim.expert import ScriptedExpert
+
+#: A Task I seed the scripted expert grasps and lifts.
+SEED = 3
+
+
+@pytest.fixture
+def blind_lift() -> Any:
+    env = RegisteredTask(sim.envs.make("lift"), registration_error_m=0.002)
+    yield env
+    env.close()
+
+
+def test_the_registered_site_is_the_given_distance_from_the_true_one(blind_lift: Any) -> None:
+    """At reset the observed site is the true site moved by exactly the registration error."""
+    for seed in range(5):
+        observation, info = blind_lift.reset(seed=seed)
+        true_site = blind_lift.unwrapped.site_position()
+        assert np.linalg.norm(info["registered_site"] - true_site) == pytest.approx(0.002, abs=1e-9)
+        assert np.allclose(observation["observation"][8:11], info["registered_site"], atol=1e-6)
+        assert np.allclose(observation["desired_goal"], blind_lift.unwrapped.goal, atol=1e-6)
+
+
+def test_the_jaw_senses_every_grasp_the_simulation_makes(blind_lift: Any) -> None:
+    """Along an expert episode the jaw-sensed grasp flag equals the simulation's grasp at every step."""
+    expert = ScriptedExpert(blind_lift)
+    observation, _ = blind_lift.reset(seed=SEED)
+    expert.reset()
+    held_steps, agreed = 0, 0
+    for _ in range(sim.envs.MAX_EPISODE_STEPS):
+        observation, _, _, _, info = blind_lift.step(expert(observation))
+        held_steps += int(info["grasped"])
+        agreed += int(bool(observation["observation"][17]) == info["grasped"])
+        if info["grasped"]:
+            assert observation["observation"][7] == pytest.approx(blind_lift.unwrapped.config.grasp.stall_rad)
+    assert held_steps >= 10, "the expert held the flap"
+    assert agreed == sim.envs.MAX_EPISODE_STEPS
+
+
+def test_success_is_the_simulation_s_truth(blind_lift: Any) -> None:
+    """info['is_success'] is the true site's distance to the goal, not the estimate's."""
+    blind_lift.reset(seed=SEED)
+    _, _, _, _, info = blind_lift.step(np.zeros(5))
+    task = blind_lift.unwrapped
+    truth = np.linalg.norm(task.site_position() - task.goal) <= task.config.success_threshold_m
+    assert info["is_success"] == truth
