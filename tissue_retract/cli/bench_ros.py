@@ -61,9 +61,9 @@ def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str,
         with PsmClient("PSM1", on_measured=on_measured) as psm:
             psm.wait_for_measurement(timeout_s=60.0)
             psm.home(timeout_s=20.0)
-            psm.move_jp(np.array([0.0, 0.0, 0.12, _ROLL0, 0.0, 0.0]))
-            time.sleep(1.5)
-            base = psm.measure().q
+            start_q = np.array([0.0, 0.0, 0.12, _ROLL0, 0.0, 0.0])
+            psm.move_jp(start_q)
+            base = _wait_until_at(psm, start_q, timeout_s=60.0)
             zeros = np.zeros(6)
             period = 1.0 / rate_hz
             start = time.perf_counter()
@@ -76,7 +76,7 @@ def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str,
                 sent[k] = time.perf_counter()
                 psm.servo_jp(JointCommand(q, zeros, zeros, 0.0, sent[k]))
                 holds += int(psm.status.holding)
-            time.sleep(0.5)
+            _wait_for_last(received, lock, timeout_s=2.0)  # the last echo, or what came within the bound
             achieved_hz = (count - 1) / (sent[-1] - sent[0]) if count > 1 else rate_hz
     finally:
         sim.terminate()
@@ -98,6 +98,29 @@ def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str,
     }
 
 
+def _wait_until_at(psm: Any, q: np.ndarray, timeout_s: float) -> np.ndarray:
+    """Measurements until the arm is within 1e-4 of ``q`` (its move_jp ended); the last measured joints."""
+    measured = psm.measure()
+    deadline = time.monotonic() + timeout_s
+    while np.max(np.abs(measured.q - q)) > 1e-4 and time.monotonic() < deadline:
+        measured = psm.next_measurement(measured.stamp_s, timeout_s)
+    return np.asarray(measured.q)
+
+
+def _wait_for_last(received: np.ndarray, lock: threading.Lock, timeout_s: float) -> None:
+    """Until the last command's echo arrived, at most ``timeout_s`` (a dropped one never comes)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with lock:
+            if not np.isnan(received[-1]):
+                return
+        time.sleep(0.005)
+
+
+def _ms(value: float | None) -> str:
+    return "none" if value is None else f"{value:.3f}"
+
+
 def run(args: argparse.Namespace) -> int:
     """Measure and print the round trip at each rate."""
     apply_local_ros_env(run_domain_id())
@@ -108,11 +131,10 @@ def run(args: argparse.Namespace) -> int:
         for rate in args.rates:
             result = _stream(rate, args.duration, env)
             results.append(result)
-            p50, p99 = result["p50_ms"], result["p99_ms"]
             print(
                 f"{rate:7.0f} Hz: {result['commands']:6d} commands, drops {result['drops']}, "
-                f"p50 {p50 if p50 is None else f'{p50:.3f}'} ms, p99 {p99 if p99 is None else f'{p99:.3f}'} ms, "
-                f"max {result['max_ms']:.3f} ms (sent at {result['achieved_send_rate_hz']:.1f} Hz)"
+                f"p50 {_ms(result['p50_ms'])} ms, p99 {_ms(result['p99_ms'])} ms, max {_ms(result['max_ms'])} ms "
+                f"(sent at {result['achieved_send_rate_hz']:.1f} Hz, {result['held_commands']} held by the deadman)"
             )
     report = {
         "benchmark": "ros round trip: servo_jp -> sim-dvrk (kinematic) -> measured_js, loopback UDPv4",
