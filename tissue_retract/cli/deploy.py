@@ -40,19 +40,18 @@ a real console on another machine pass ``--network`` and the console's domain id
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 
 from hardware_if.deploy import DeployOptions, deploy
-from hardware_if.network import apply_local_ros_env, environment_domain_id
 from hardware_if.registration import read_registration
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from safety.config import MAX_CONTROL_RATE_HZ, MIN_CONTROL_RATE_HZ, load_safety_config
 from tissue_retract.cli._checks import MAX_EPISODES, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
+from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments, point_argument
 
 __all__ = ["add_arguments", "run"]
 
@@ -74,13 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml)")
     parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
     source = parser.add_mutually_exclusive_group()
-    source.add_argument(
-        "--site",
-        type=float_in(-1.0, 1.0),
-        nargs=3,
-        metavar=("X", "Y", "Z"),
-        default=None,
-        help="dvrk: the registered grasp site [m] in <arm>_base; the task state comes from it and the jaw",
+    point_argument(
+        source, "--site", "dvrk: the registered grasp site [m] in <arm>_base; the task state comes from it and the jaw"
     )
     source.add_argument(
         "--registration", metavar="FILE", default=None, help="dvrk: the site from `tissue-retract register --out FILE`"
@@ -90,13 +84,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="dvrk: site, goal and grasp from /<arm>/task/* (a perception node); the default without --site",
     )
-    parser.add_argument(
+    point_argument(
+        parser,
         "--goal",
-        type=float_in(-1.0, 1.0),
-        nargs=3,
-        metavar=("X", "Y", "Z"),
-        default=None,
-        help="with --site/--registration: where the site must go [m] in <arm>_base (default: the task's nominal goal)",
+        "with --site/--registration: where the site must go [m] in <arm>_base (default: the task's nominal goal)",
     )
     add_live_argument(parser)
     parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=1, help="episodes (default: 1)")
@@ -116,16 +107,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help="longest a policy step may take before the arm is held (default: one policy period)",
     )
-    parser.add_argument(
-        "--domain-id",
-        type=int_in(0, 232),
-        default=environment_domain_id(),
-        help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID or 0)",
-    )
-    parser.add_argument(
-        "--network",
-        action="store_true",
-        help="dvrk only, not with --dry-run: keep your ROS discovery settings instead of localhost-only",
+    add_console_arguments(
+        parser, network_help="dvrk only, not with --dry-run: keep your ROS discovery settings instead of localhost-only"
     )
 
 
@@ -134,10 +117,7 @@ def run(args: argparse.Namespace) -> int:
     if args.network and args.dry_run:
         raise ConfigurationError("--network", True, "not with --dry-run: dry runs stay on localhost")
     if args.target == "dvrk":
-        if args.network:
-            os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
-        else:
-            apply_local_ros_env(args.domain_id)  # before rclpy starts
+        apply_console_arguments(args)
 
     safety_config = None
     if args.safety_config is not None:

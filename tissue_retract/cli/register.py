@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 
-from hardware_if.network import apply_local_ros_env, environment_domain_id
 from psm_control.inputs import check_output_path
 from tissue_retract.cli._checks import float_in, int_in
+from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
 __all__ = ["add_arguments", "run"]
 
@@ -35,24 +34,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=10.0,
         help="seconds to wait for each measurement of the arm (default: 10)",
     )
-    parser.add_argument(
-        "--domain-id",
-        type=int_in(0, 232),
-        default=environment_domain_id(),
-        help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID or 0)",
-    )
-    parser.add_argument(
-        "--network", action="store_true", help="keep your ROS discovery settings instead of localhost-only"
-    )
+    add_console_arguments(parser, network_help="keep your ROS discovery settings instead of localhost-only")
 
 
 def run(args: argparse.Namespace) -> int:
     """Register, print ``site: X Y Z``; 0, or 1 with the reason when the tool was not still or the arm silent."""
     output = check_output_path(args.out, "--out") if args.out else None
-    if args.network:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
-    else:
-        apply_local_ros_env(args.domain_id)  # before rclpy starts
+    apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
     from hardware_if.psm_client import PsmClient
     from hardware_if.registration import RegistrationError, register_site

@@ -1,0 +1,35 @@
+"""Options shared by the commands that talk to a dVRK console: its domain and how far discovery reaches."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+from hardware_if.network import apply_local_ros_env, environment_domain_id
+from tissue_retract.cli._checks import float_in, int_in
+
+__all__ = ["add_console_arguments", "apply_console_arguments", "point_argument"]
+
+
+def add_console_arguments(parser: argparse.ArgumentParser, *, network_help: str) -> None:
+    """``--domain-id`` and ``--network``."""
+    parser.add_argument(
+        "--domain-id",
+        type=int_in(0, 232),
+        default=environment_domain_id(),
+        help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID or 0)",
+    )
+    parser.add_argument("--network", action="store_true", help=network_help)
+
+
+def apply_console_arguments(args: argparse.Namespace) -> None:
+    """Set the ROS environment the options ask for; call before rclpy is imported (Fast DDS reads it then)."""
+    if args.network:
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    else:
+        apply_local_ros_env(args.domain_id)
+
+
+def point_argument(parser: argparse.ArgumentParser | argparse._MutuallyExclusiveGroup, flag: str, help: str) -> None:
+    """An ``X Y Z`` option in metres in ``<arm>_base``, each coordinate in [-1, 1]."""
+    parser.add_argument(flag, type=float_in(-1.0, 1.0), nargs=3, metavar=("X", "Y", "Z"), default=None, help=help)
