@@ -43,7 +43,11 @@ class PhysicsParams:
             stable at 1/240 s and not at 1/120 s (measured for the default flap).
         substeps: Substeps per environment step (12 x 1/240 s = 0.05 s per step).
         solver_iterations: Constraint solver iterations (the paper's code used 50).
-        settle_s: Time the flap settles under gravity before an episode starts [s].
+        settle_s: Shortest time the flap settles under gravity before an episode starts [s].
+        settle_max_s: Longest: the flap settles until at rest (see :meth:`Scene.settle`) or this long [s].
+        settle_speed_m_per_s: At rest: no node of the flap moves faster than this, on average over
+            0.05 s [m/s]. A flap released from flat keeps sagging for up to about 1.5 s (3-7.5 mm at
+            the site, measured); an episode that started earlier began on a falling flap.
         control_period_s: Period of the control chain's ticks [s], a whole number of substeps that
             divides the step; a joint set-point is held for the substeps in between, as the dVRK's servo
             loop holds its last ``servo_jp``. 40 Hz (two ticks per step): Ruckig plans the whole
@@ -56,9 +60,17 @@ class PhysicsParams:
     substeps: int = 12
     solver_iterations: int = 10
     settle_s: float = 0.25
+    settle_max_s: float = 3.0
+    settle_speed_m_per_s: float = 0.002
     control_period_s: float = 1.0 / 40.0
 
     def __post_init__(self) -> None:
+        if not 0 <= self.settle_s <= self.settle_max_s or not self.settle_speed_m_per_s > 0:
+            raise ConfigurationError(
+                "settle_s/settle_max_s/settle_speed_m_per_s",
+                (self.settle_s, self.settle_max_s, self.settle_speed_m_per_s),
+                "0 <= settle_s <= settle_max_s and a positive speed",
+            )
         if not 0 < self.time_step_s <= 0.01:
             raise ConfigurationError("time_step_s", self.time_step_s, "a substep in (0, 0.01] s")
         if self.substeps < 1 or self.solver_iterations < 1:
@@ -160,7 +172,25 @@ class Scene:
         for _ in range(substeps):
             p.stepSimulation(physicsClientId=self.client)
 
-    def settle(self) -> None:
-        """Let the flap come to rest under gravity."""
-        for _ in range(round(self.physics.settle_s / self.physics.time_step_s)):
+    def settle(self) -> float:
+        """Let the flap come to rest under gravity; return how long it took [s].
+
+        At least ``settle_s``, then 0.05 s windows until no node moved faster than
+        ``settle_speed_m_per_s`` over one, at most ``settle_max_s``.
+        """
+        physics = self.physics
+        window = max(1, round(0.05 / physics.time_step_s))
+        steps = round(physics.settle_s / physics.time_step_s)
+        for _ in range(steps):
             p.stepSimulation(physicsClientId=self.client)
+        before = self.tissue.positions()
+        while steps * physics.time_step_s < physics.settle_max_s:
+            for _ in range(window):
+                p.stepSimulation(physicsClientId=self.client)
+            steps += window
+            now = self.tissue.positions()
+            fastest = float(np.max(np.linalg.norm(now - before, axis=1))) / (window * physics.time_step_s)
+            before = now
+            if fastest < physics.settle_speed_m_per_s:
+                break
+        return steps * physics.time_step_s
