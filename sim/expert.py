@@ -18,6 +18,8 @@ __all__ = ["ScriptedExpert"]
 _HOVER_M = 0.008
 _NEAR_M = 0.0015
 _RETRACT_OFFSET_M = np.array([0.0, -0.02, 0.035])  # up and back towards the pinned edge (Expose task)
+#: The Expose task's retraction stops this far past the exposure target (a margin for the flap's sway).
+_EXPOSURE_MARGIN = 0.1
 # Fraction of a step's goal the control chain covers within the step, from rest or in steady motion.
 _TRACKED_FRACTION = 0.5
 
@@ -33,16 +35,20 @@ class ScriptedExpert:
         self.env: TissueRetractEnv = env.unwrapped
         self.phase = "approach"
         self._waited = 0
+        self._start_site: np.ndarray | None = None
 
     def reset(self) -> None:
         """Start a new episode."""
         self.phase = "approach"
         self._waited = 0
+        self._start_site = None
 
     def __call__(self, observation: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """The action for the current state (the observation is not needed: the expert is privileged)."""
         env = self.env
         grasp, site = env.grasp_position(), env.site_position()
+        if self._start_site is None:  # the first call of an episode: where the flap rests
+            self._start_site = site.copy()
         holding = env.scene is not None and env.scene.grasp.holding
         if self.phase in ("retract", "hold") and not holding:
             self.phase = "approach"  # the grip slipped: start again
@@ -70,13 +76,14 @@ class ScriptedExpert:
             if self._waited > len(self.env._pending):
                 self.phase, self._waited = "approach", 0
             return self._move(np.zeros(3), jaw=1.0)
+        if isinstance(self.env, ExposeEnv) and self.env.exposure() >= self.env.exposure_target + _EXPOSURE_MARGIN:
+            return self._move(np.zeros(3), jaw=-1.0)  # enough is exposed: hold, do not stretch the flap further
         return self._move(self._retract_target(site) - site, jaw=-1.0)
 
     def _retract_target(self, site: np.ndarray) -> np.ndarray:
         env = self.env
-        if isinstance(env, ExposeEnv):
-            assert env.scene is not None
-            start = env.scene.tissue.rest_positions[env._site_nodes].T @ env._site_weights
+        if isinstance(env, ExposeEnv):  # from where the site rested when the episode began
+            start = site if self._start_site is None else self._start_site
             return np.asarray(start + _RETRACT_OFFSET_M)
         return np.asarray(env.goal, dtype=float)
 
