@@ -133,27 +133,6 @@ class TaskArm:
         self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
         self._info = {**self._info, "grasped": False}
 
-    def settle(self, *, tolerance_m: float = 1e-4, window_s: float = 0.25, max_s: float = 10.0) -> float:
-        """Run the physics with the arm still until the site moves less than ``tolerance_m`` in ``window_s``.
-
-        The flap keeps sagging for a moment after a reset; an operator registers it at rest.
-
-        Returns:
-            The simulated time it took [s] (about ``max_s`` if it never came to rest).
-        """
-        steps_per_window = max(1, round(window_s / self.step_s))
-        site = np.asarray(self.env.site_position(), dtype=float)
-        elapsed = 0.0
-        while elapsed < max_s:
-            for _ in range(steps_per_window):
-                self.step(self.step_s)
-            elapsed += steps_per_window * self.step_s
-            now = np.asarray(self.env.site_position(), dtype=float)
-            moved, site = float(np.linalg.norm(now - site)), now
-            if moved < tolerance_m:
-                break
-        return elapsed
-
     @property
     def base_frame(self) -> np.ndarray:
         """Pose of the RCM in the world (= ``<arm>_base``) for the current episode (4x4)."""

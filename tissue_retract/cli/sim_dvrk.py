@@ -115,7 +115,6 @@ def run(args: argparse.Namespace) -> int:
             if truth_path is not None and task is not None:
                 truth = TruthLog(node, task, truth_path)
             if task is not None and args.blind:
-                task.settle()  # the site an operator would register: the flap at rest
                 state = task.task_state()
                 for name in ("site", "goal"):
                     print(f"{name}: " + " ".join(f"{v:.5f}" for v in state[name]), flush=True)
