@@ -44,7 +44,7 @@ import sim.envs
 from hardware_if.errors import DvrkError, HoldError
 from hardware_if.recording import Recorder
 from hardware_if.session import ros_session
-from hardware_if.task_estimate import TaskEstimate
+from hardware_if.task_estimate import TaskEstimate, as_point, format_point
 from policies.resolve import resolve_policy
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from psm_control.errors import ConfigurationError
@@ -165,7 +165,9 @@ class DeployOptions:
         if self.goal is not None and self.site is None:
             raise ConfigurationError("goal", self.goal, "--goal with --site (the task topics bring their own goal)")
         if self.site is not None:
-            TaskEstimate(np.asarray(self.site), np.asarray(self.goal if self.goal is not None else self.site))
+            as_point(self.site, "site")
+        if self.goal is not None:
+            as_point(self.goal, "goal")
         if self.policy_budget_s is not None and not (np.isfinite(self.policy_budget_s) and self.policy_budget_s > 0):
             raise ConfigurationError("policy_budget_s", self.policy_budget_s, "a finite number of seconds > 0")
         if self.target not in ("sim", "dvrk"):
@@ -463,7 +465,7 @@ def _deploy_dvrk(
             site = np.asarray(options.site, dtype=float)
             goal = sim.envs.nominal_goal(options.task, site) if options.goal is None else np.asarray(options.goal)
             listener = RegisteredSite(TaskEstimate(site, goal), client)
-            echo(f"task state: registered site {_xyz(site)}, goal {_xyz(goal)} (no task topics)")
+            echo(f"task state: registered site {format_point(site)}, goal {format_point(goal)} (no task topics)")
         else:
             listener = TaskListener(options.arm, listen_only=options.dry_run)
         try:
@@ -626,11 +628,6 @@ def _dvrk_episode(
     if options.dry_run:
         entry["deadman"] = client.status.reason
     return entry
-
-
-def _xyz(point: np.ndarray) -> str:
-    """A point as ``X Y Z`` in metres, as the command line takes it."""
-    return " ".join(f"{v:.4f}" for v in point)
 
 
 def _task_point(listener: Any, name: str) -> np.ndarray | None:

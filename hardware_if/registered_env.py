@@ -72,15 +72,11 @@ class RegisteredTask(gym.Wrapper):
         observation, reward, terminated, truncated, info = self.env.step(action)
         return self._estimated(observation), float(reward), terminated, truncated, info
 
-    def _measured_jaw(self) -> float:
-        task: Any = self.env.unwrapped
-        return task.config.grasp.measured_jaw(task.backend.jaw, task.scene.grasp.holding)
-
     def _estimated(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         task: Any = self.env.unwrapped
         if self.estimate is None:
             raise RuntimeError("call reset() before step()")
-        jaw = self._measured_jaw()
+        jaw = task.config.grasp.measured_jaw(task.backend.jaw, task.scene.grasp.holding)
         # The simulated jaw reaches its set-point within a control tick (it is not lagged, see
         # sim.backend) and a stalled one does not move: at the end of a policy step it is still.
         self.estimate.update(JawReading(jaw, 0.0, float(task.backend.jaw)), task.grasp_position())

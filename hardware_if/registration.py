@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from hardware_if.task_estimate import as_point, format_point
 from psm_control.errors import ConfigurationError, TissueRetractError
 from psm_control.inputs import read_text
 from psm_control.robot import PsmModel
@@ -57,7 +58,7 @@ class Registration:
 
     def line(self) -> str:
         """``site: X Y Z`` in metres, as ``deploy --site`` takes it."""
-        return "site: " + " ".join(f"{v:.5f}" for v in self.site_m)
+        return f"site: {format_point(self.site_m)}"
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form ``deploy --registration`` reads."""
@@ -129,14 +130,14 @@ def read_registration(path: str | Path, arm: str) -> np.ndarray:
     text = read_text(path, "--registration")
     try:
         data = json.loads(text)
-        site = np.asarray(data["site_m"], dtype=float)
+        site = as_point(data["site_m"], "site_m")
         recorded_arm = str(data["arm"])
+    except ConfigurationError:
+        raise ConfigurationError("--registration", str(path), "site_m: three finite coordinates [m]") from None
     except (ValueError, KeyError, TypeError):
         raise ConfigurationError(
             "--registration", str(path), "a JSON file written by `tissue-retract register --out`"
         ) from None
     if recorded_arm != arm:
         raise ConfigurationError("--registration", str(path), f"a registration of {arm} (this one is {recorded_arm}'s)")
-    if site.shape != (3,) or not np.all(np.isfinite(site)):
-        raise ConfigurationError("--registration", str(path), "site_m: three finite coordinates [m]")
     return site

@@ -28,7 +28,7 @@ import numpy as np
 
 from psm_control.errors import ConfigurationError
 
-__all__ = ["JawGraspSensing", "JawReading", "TaskEstimate"]
+__all__ = ["JawGraspSensing", "JawReading", "TaskEstimate", "as_point", "format_point"]
 
 
 class JawReading(NamedTuple):
@@ -76,7 +76,7 @@ class JawGraspSensing:
         )
 
 
-def _point(value: object, name: str) -> np.ndarray:
+def as_point(value: object, name: str) -> np.ndarray:
     """A finite 3-vector [m], or a :class:`ConfigurationError` naming ``name``."""
     try:
         point = np.asarray(value, dtype=float).reshape(-1)
@@ -85,6 +85,11 @@ def _point(value: object, name: str) -> np.ndarray:
     if point.shape != (3,) or not np.all(np.isfinite(point)):
         raise ConfigurationError(name, value, "three finite coordinates X Y Z [m] in <arm>_base")
     return point
+
+
+def format_point(point: np.ndarray) -> str:
+    """A point as ``X Y Z`` in metres (to 0.01 mm), as ``--site`` and ``--goal`` take it."""
+    return " ".join(f"{v:.5f}" for v in point)
 
 
 class TaskEstimate:
@@ -97,8 +102,8 @@ class TaskEstimate:
     """
 
     def __init__(self, site: np.ndarray, goal: np.ndarray, sensing: JawGraspSensing | None = None) -> None:
-        self.registered_site = _point(site, "site")
-        self.goal = _point(goal, "goal")
+        self.registered_site = as_point(site, "site")
+        self.goal = as_point(goal, "goal")
         self.sensing = sensing or JawGraspSensing()
         self._grasp_start: np.ndarray | None = None
         self._moved = np.zeros(3)

@@ -30,6 +30,7 @@ import numpy as np
 from hardware_if.network import apply_local_ros_env, environment_domain_id
 from hardware_if.session import require_ros, ros_session
 from hardware_if.sim_task import TaskArm, TaskTopics, TruthLog
+from hardware_if.task_estimate import format_point
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
@@ -117,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
             if task is not None and args.blind:
                 state = task.task_state()
                 for name in ("site", "goal"):
-                    print(f"{name}: " + " ".join(f"{v:.5f}" for v in state[name]), flush=True)
+                    print(f"{name}: {format_point(state[name])}", flush=True)
                 node.get_logger().info(f"task {args.task!r} scene (seed {args.seed}), blind: no task topics")
             elif task is not None:
                 TaskTopics(node, task)
