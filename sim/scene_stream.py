@@ -40,6 +40,14 @@ ARM_TOPIC = "/scene/arm"
 TASK_TOPIC = "/scene/task"
 LOG_TOPIC = "/scene/log"
 
+#: The channel of each scene topic, by the message it carries.
+_SCENE_CHANNELS = {
+    TRANSFORMS_TOPIC: channels.FrameTransformsChannel,
+    ARM_TOPIC: channels.SceneUpdateChannel,
+    TASK_TOPIC: channels.SceneUpdateChannel,
+    LOG_TOPIC: channels.LogChannel,
+}
+
 #: The link shapes are sent again this often [s], so that a player seeking into a recording finds them.
 _ARM_REPEAT_S = 1.0
 
@@ -75,7 +83,11 @@ class LiveScene:
             self._server = foxglove.start_server(name=name, host="127.0.0.1", port=port)
         except RuntimeError as e:  # the SDK reports a taken port as a RuntimeError
             raise ConfigurationError("live port", port, f"a free TCP port on 127.0.0.1 ({e})") from e
-        self._channels: dict[str, Any] = {}
+        # Every scene channel exists before anyone can know the port, so a client finds them all in the
+        # advertisement that greets it. A channel made while a client is connected is advertised to it
+        # before the server can serve it (foxglove-sdk 0.30): a client that subscribes as soon as it
+        # sees the advertisement is told "Unknown channel ID" and never receives a message.
+        self._channels: dict[str, Any] = {topic: make(topic) for topic, make in _SCENE_CHANNELS.items()}
 
     @property
     def port(self) -> int:
@@ -83,7 +95,7 @@ class LiveScene:
         return int(self._server.port)
 
     def write_message(self, topic: str, message: Any, t_s: float) -> None:
-        """Log a message on its topic (the channel is made on first use, typed by the message)."""
+        """Log a message on its topic (a topic other than the scene's gets a channel on first use)."""
         channel = self._channels.get(topic)
         if channel is None:
             channel = getattr(channels, f"{type(message).__name__}Channel")(topic)

@@ -57,18 +57,19 @@ def test_stream_skips_ticks_closer_than_its_period() -> None:
 
 
 def test_live_server_serves_the_scene_on_loopback() -> None:
-    """A client on ws://127.0.0.1 sees the scene's channels advertised and receives the arm's frames."""
+    """A client on ws://127.0.0.1 is greeted with every scene channel, before anything was logged on them
+    (a channel made after the client connected could not be subscribed to at once), and receives the arm's
+    frames."""
     model = PsmModel.from_variant("classic")
     live = LiveScene(port=0)
     try:
         stream = SceneStream(PsmScene(model, "PSM1_base"), [live])
-        stream.tick(0.0, model.home(), 0.0)  # makes the channels, so they are advertised on connection
         with connect(f"ws://127.0.0.1:{live.port}", subprotocols=[SUBPROTOCOL], open_timeout=60) as client:
-            channels: dict[str, Any] = {}
-            while TRANSFORMS_TOPIC not in channels:
+            message = json.loads(client.recv(timeout=60))
+            while message["op"] != "advertise":
                 message = json.loads(client.recv(timeout=60))
-                if message["op"] == "advertise":
-                    channels.update({c["topic"]: c for c in message["channels"]})
+            channels: dict[str, Any] = {c["topic"]: c for c in message["channels"]}
+            assert set(channels) == {TRANSFORMS_TOPIC, ARM_TOPIC, TASK_TOPIC, LOG_TOPIC}
             assert channels[TRANSFORMS_TOPIC]["schemaName"] == "foxglove.FrameTransforms"
             assert channels[ARM_TOPIC]["schemaName"] == "foxglove.SceneUpdate"
             subscription = {"id": 7, "channelId": channels[TRANSFORMS_TOPIC]["id"]}
