@@ -11,6 +11,14 @@ scores the policy by the true distance of the site to the goal.
 
 The scripted expert reads the environment itself, not the observation, and sees the truth: blind
 figures are meaningful for policies that act on the observation (checkpoints, ``module:callable``).
+
+For training (``train --blind``) the wrapper draws the registration distance per episode, uniformly up
+to ``registration_error_m``, and leaves the observation's ``achieved_goal`` true: a learner recomputes
+its reward (and HER its relabelled rewards) from ``achieved_goal`` and ``desired_goal``, so it is
+rewarded by where the tissue really is, while everything the policy acts on (the observation vector
+and the desired goal) is what the robot would have. The policy can then learn what the estimate gets
+wrong in a way it can see (the flap stretching between the jaws and the site) instead of stopping where
+the estimate says the goal is.
 """
 
 from __future__ import annotations
@@ -41,27 +49,40 @@ class RegisteredTask(gym.Wrapper):
         registration_error_m: Distance of the registered site from the true site [m].
         goal_source: ``given`` (the true goal) or ``nominal`` (:func:`sim.envs.nominal_goal` about the
             registered site).
+        for_training: Draw the registration distance uniformly in ``[0, registration_error_m]`` per
+            episode and keep the true ``achieved_goal`` (the reward's input; see the module notes).
     """
 
-    def __init__(self, env: gym.Env, *, registration_error_m: float = 0.002, goal_source: str = "given") -> None:
+    def __init__(
+        self,
+        env: gym.Env,
+        *,
+        registration_error_m: float = 0.002,
+        goal_source: str = "given",
+        for_training: bool = False,
+    ) -> None:
         super().__init__(env)
         if not 0 <= registration_error_m <= 0.05:
             raise ConfigurationError("registration_error_m", registration_error_m, "a distance in [0, 0.05] m")
         if goal_source not in GOAL_SOURCES:
             raise ConfigurationError("goal_source", goal_source, f"one of {', '.join(GOAL_SOURCES)}")
         task: Any = env.unwrapped
-        if task.nominal_goal(np.zeros(3)) is None:
+        nominal_goal = getattr(task, "nominal_goal", None)
+        if nominal_goal is None or nominal_goal(np.zeros(3)) is None:
             raise ConfigurationError("task", env.spec.id if env.spec else env, "a task whose goal is a place (I-III)")
         self.registration_error_m = float(registration_error_m)
         self.goal_source = goal_source
+        self.for_training = for_training
         self.estimate: TaskEstimate | None = None
 
     def reset(self, **kwargs: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Reset the task and register its site (with the error) and goal."""
         observation, info = self.env.reset(**kwargs)
         task: Any = self.env.unwrapped
-        direction = np.random.default_rng(kwargs.get("seed")).standard_normal(3)
-        site = task.site_position() + self.registration_error_m * direction / np.linalg.norm(direction)
+        rng = np.random.default_rng(kwargs.get("seed"))
+        direction = rng.standard_normal(3)
+        distance = self.registration_error_m * (rng.uniform() if self.for_training else 1.0)
+        site = task.site_position() + distance * direction / np.linalg.norm(direction)
         goal = task.goal if self.goal_source == "given" else task.nominal_goal(site)
         self.estimate = TaskEstimate(site, goal)
         info["registered_site"] = site
@@ -86,8 +107,9 @@ class RegisteredTask(gym.Wrapper):
         vector[_SITE] = site
         vector[_TO_SITE] = site - vector[_TIP]
         vector[_GRASPED] = float(self.estimate.grasped)
+        achieved = observation["achieved_goal"] if self.for_training else self.estimate.achieved_goal
         return {
             "observation": vector.astype(np.float32),
-            "achieved_goal": self.estimate.achieved_goal.astype(np.float32),
+            "achieved_goal": np.asarray(achieved, dtype=np.float32),
             "desired_goal": self.estimate.goal.astype(np.float32),
         }

@@ -15,6 +15,7 @@ import contextlib
 import csv
 import importlib
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -64,6 +65,8 @@ class RunSpec:
         resume: Continue from ``out_dir``'s checkpoint when there is one.
         progress: Show a progress bar.
         tensorboard: Write TensorBoard logs.
+        env_wrapper: Wraps the task for training and its evaluations (e.g. what a robot without
+            perception observes, ``train --blind``); ``None`` trains on the task as it is.
     """
 
     task_id: str
@@ -78,6 +81,7 @@ class RunSpec:
     resume: bool = True
     progress: bool = True
     tensorboard: bool = True
+    env_wrapper: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
 
     def __post_init__(self) -> None:
         for name, low in (("seed", 0), ("episodes", 1), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
@@ -201,8 +205,9 @@ def train(spec: RunSpec, config: TrainConfig) -> TrainResult:
     """
     torch.set_num_threads(1)
     ensure_registered(spec.task_id)
-    env = gym.make(spec.task_id)
-    eval_env = gym.make(spec.task_id)
+    env, eval_env = gym.make(spec.task_id), gym.make(spec.task_id)
+    if spec.env_wrapper is not None:
+        env, eval_env = spec.env_wrapper(env), spec.env_wrapper(eval_env)
     try:
         return _train(spec, config, env, eval_env)
     finally:

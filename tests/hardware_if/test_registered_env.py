@@ -55,3 +55,23 @@ def test_success_is_the_simulation_s_truth(blind_lift: Any) -> None:
     task = blind_lift.unwrapped
     truth = np.linalg.norm(task.site_position() - task.goal) <= task.config.success_threshold_m
     assert info["is_success"] == truth
+
+
+def test_for_training_the_reward_sees_the_truth_and_the_policy_the_estimate() -> None:
+    """for_training: the registration distance is drawn within the bound, achieved_goal (what a learner
+    computes its reward from) is the true site, and the policy's inputs are still the estimate."""
+    env = RegisteredTask(sim.envs.make("lift"), registration_error_m=0.003, for_training=True)
+    try:
+        distances = []
+        for seed in range(6):
+            observation, info = env.reset(seed=seed)
+            task = env.unwrapped
+            distances.append(float(np.linalg.norm(info["registered_site"] - task.site_position())))
+            assert np.allclose(observation["observation"][8:11], info["registered_site"], atol=1e-6)
+            observation, _, _, _, _ = env.step(np.zeros(5))
+            assert np.allclose(observation["achieved_goal"], task.site_position(), atol=1e-6)
+            assert np.allclose(observation["observation"][8:11], info["registered_site"], atol=1e-6)
+        assert all(0.0 <= d <= 0.003 + 1e-12 for d in distances)
+        assert len({round(d, 9) for d in distances}) == len(distances), "a new distance every episode"
+    finally:
+        env.close()

@@ -131,3 +131,26 @@ def test_demonstrations_from_a_file_in_the_simulation_layout(tmp_path: Path) -> 
     for item in TINY:
         args += ["--set", item]
     assert main(args) == 0
+
+
+def test_train_blind_trains_on_the_registered_task(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """train --blind runs end to end, and its checkpoint records the flags that reproduce it."""
+    args = ["train", "--task", "lift", "--algo", "ddpgbc", "--demos", "1", "--episodes", "2", "--blind"]
+    args += ["--registration-error-mm", "2.5", "--out", str(tmp_path), "--eval-every", "2", "--eval-episodes", "1"]
+    args += ["--no-progress", "--no-tensorboard"]
+    for item in TINY:
+        args += ["--set", item]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        assert main(args) == 0
+    capsys.readouterr()
+    command = load_checkpoint(tmp_path / "policy.safetensors").meta["command"]
+    assert "--blind" in command and "2.5" in command
+
+
+def test_train_blind_refuses_a_task_without_a_goal_place(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--blind on a task whose goal is not a place is refused with what is allowed, not a traceback."""
+    args = ["train", "--task", TOY_TASK_ID, "--algo", "ddpgbc", "--demos", "1", "--episodes", "1", "--blind"]
+    assert main([*args, "--out", str(tmp_path), "--no-progress", "--no-tensorboard"]) == 1
+    assert "a task whose goal is a place" in capsys.readouterr().err
+    assert not (tmp_path / "policy.safetensors").exists()

@@ -4,21 +4,32 @@ Writes to ``--out``: ``policy.safetensors`` (the deterministic actor, for ``eval
 ``resume.safetensors`` (everything needed to continue: running the same command again resumes from
 it), ``eval.csv`` (success rate per evaluation) and TensorBoard logs in ``tb/``. Defaults are the seed
 paper's; ``--set FIELD=VALUE`` overrides any field of :class:`policies.config.TrainConfig`.
+
+``--blind`` (Tasks I-III) trains on what a robot without perception observes (``evaluate --blind``,
+``deploy --site``): a site registered up to ``--registration-error-mm`` from the true one, a jaw-sensed
+grasp and the estimated site, rewarded by the simulation's true distance to the goal (see
+:mod:`hardware_if.registered_env`). Demonstrations and the evaluations in ``eval.csv`` see the same.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import shlex
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
+import gymnasium as gym
+
+from hardware_if.registered_env import RegisteredTask
 from policies.config import TrainConfig
 from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
 from psm_control.errors import ConfigurationError
-from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, int_in
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, float_in, int_in
 
 __all__ = ["add_arguments", "parse_overrides", "run"]
 
@@ -53,6 +64,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", help="override a TrainConfig field (JSON value)"
+    )
+    parser.add_argument(
+        "--blind",
+        action="store_true",
+        help="Tasks I-III: observe a registered site and a jaw-sensed grasp, rewarded by the true distance",
+    )
+    parser.add_argument(
+        "--registration-error-mm",
+        type=float_in(0.0, 50.0),
+        default=3.0,
+        metavar="MM",
+        help="with --blind: the largest registration error drawn per episode [mm] (default: 3)",
     )
     parser.add_argument("--fresh", action="store_true", help="ignore an existing checkpoint in --out and start over")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -101,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
         resume=not args.fresh,
         progress=not args.no_progress,
         tensorboard=not args.no_tensorboard,
+        env_wrapper=_blind(args.registration_error_mm) if args.blind else None,
     )
     result = train(spec, config)
     if result.resumed_from:
@@ -124,6 +148,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _blind(registration_error_mm: float) -> Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]]:
+    """What ``--blind`` trains on: the task as a robot without perception observes it."""
+    return functools.partial(RegisteredTask, registration_error_m=registration_error_mm / 1000.0, for_training=True)
+
+
 def _rebuild(args: argparse.Namespace) -> str:
     parts = ["tissue-retract", "train", "--task", args.task, "--algo", args.algo, "--demos", str(args.demos)]
     parts += ["--seed", str(args.seed), "--episodes", str(args.episodes)]
@@ -131,4 +160,6 @@ def _rebuild(args: argparse.Namespace) -> str:
         parts += ["--out", str(args.out)]
     for item in args.set:
         parts += ["--set", item]
+    if args.blind:
+        parts += ["--blind", "--registration-error-mm", f"{args.registration_error_mm:g}"]
     return shlex.join(parts)
