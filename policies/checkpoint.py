@@ -153,6 +153,7 @@ def save_checkpoint(
     training: bool = False,
     arrays: Mapping[str, np.ndarray] | None = None,
     rng: Mapping[str, Any] | None = None,
+    observation: str = "task",
 ) -> Path:
     """Write a checkpoint atomically (a crash mid-write leaves the previous file intact).
 
@@ -166,6 +167,8 @@ def save_checkpoint(
         training: Also write critics, targets, optimiser state, ``arrays`` and ``rng`` (to resume).
         arrays: Extra arrays by tensor name (replay buffers), training checkpoints only.
         rng: JSON-ready random generator states, training checkpoints only.
+        observation: What the policy observed in training: ``task`` (the task's own observation) or
+            the name of what replaced it (``train --blind``).
     """
 
     tensors: dict[str, torch.Tensor] = {}
@@ -194,6 +197,7 @@ def save_checkpoint(
         "config": agent.config.to_dict(),
         "package_version": __version__,
         "command": command,
+        "observation": observation,
         "progress": dict(progress),
         "updates": agent.updates,
     }

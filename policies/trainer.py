@@ -67,6 +67,8 @@ class RunSpec:
         tensorboard: Write TensorBoard logs.
         env_wrapper: Wraps the task for training and its evaluations (e.g. what a robot without
             perception observes, ``train --blind``); ``None`` trains on the task as it is.
+        observation: Names what the policy observes (``task`` without a wrapper); recorded in the
+            checkpoints, and a run resumes only with the same.
     """
 
     task_id: str
@@ -82,6 +84,7 @@ class RunSpec:
     progress: bool = True
     tensorboard: bool = True
     env_wrapper: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
+    observation: str = "task"
 
     def __post_init__(self) -> None:
         for name, low in (("seed", 0), ("episodes", 1), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
@@ -254,7 +257,12 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
 
     def checkpoint(episode: int) -> None:
         progress = {"episodes": episode, "env_steps": env_steps, "updates": agent.updates}
-        common: dict[str, Any] = {"task_id": spec.task_id, "spaces": spaces, "command": spec.command}
+        common: dict[str, Any] = {
+            "task_id": spec.task_id,
+            "spaces": spaces,
+            "command": spec.command,
+            "observation": spec.observation,
+        }
         save_checkpoint(
             resume_path, agent, progress=progress, training=True, arrays=_prefixed("replay", buffer.state()),
             rng={"agent": agent.rng.bit_generator.state, "seed": spec.seed}, **common,
@@ -353,6 +361,7 @@ def _resume(
         ("task", meta.get("task_id"), spec.task_id),
         ("seed", saved_seed, spec.seed),
         ("config", meta.get("config"), config.to_dict()),
+        ("observation", meta.get("observation", "task"), spec.observation),
     ):
         if saved != wanted:
             raise CheckpointError(

@@ -154,3 +154,19 @@ def test_train_blind_refuses_a_task_without_a_goal_place(tmp_path: Path, capsys:
     assert main([*args, "--out", str(tmp_path), "--no-progress", "--no-tensorboard"]) == 1
     assert "a task whose goal is a place" in capsys.readouterr().err
     assert not (tmp_path / "policy.safetensors").exists()
+
+
+def test_a_run_resumes_only_on_what_it_observed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A run trained on the task's observation does not silently continue on the blind one."""
+    args = ["train", "--task", "lift", "--algo", "ddpgbc", "--demos", "1", "--out", str(tmp_path)]
+    args += ["--eval-every", "1", "--eval-episodes", "1", "--no-progress", "--no-tensorboard"]
+    for item in TINY:
+        args += ["--set", item]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        assert main([*args, "--episodes", "1"]) == 0
+        assert load_checkpoint(tmp_path / "resume.safetensors").meta["observation"] == "task"
+        capsys.readouterr()
+        assert main([*args, "--episodes", "2", "--blind"]) == 1
+    err = capsys.readouterr().err
+    assert "different observation" in err and "--fresh" in err

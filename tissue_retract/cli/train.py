@@ -125,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         tensorboard=not args.no_tensorboard,
         env_wrapper=_blind(args.registration_error_mm) if args.blind else None,
+        observation=f"blind, registration error up to {args.registration_error_mm:g} mm" if args.blind else "task",
     )
     result = train(spec, config)
     if result.resumed_from:
