@@ -33,7 +33,8 @@ from psm_control.inputs import check_output_path
 from safety.config import load_safety_config
 from sim.evaluation import EpisodeResult, PolicyError, run_episode, summarize, timed
 from sim.scene_stream import LiveScene, StreamScene
-from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, float_in, int_in
+from tissue_retract.cli._blind import add_blind_arguments
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, int_in
 from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
@@ -52,17 +53,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml), e.g. force_limit_n"
     )
     parser.add_argument("--json", metavar="FILE", default=None, help="write {summary, episodes} as JSON")
-    parser.add_argument(
-        "--blind",
-        action="store_true",
-        help="Tasks I-III: observe a registered site and a jaw-sensed grasp instead of the simulation's truth",
-    )
-    parser.add_argument(
-        "--registration-error-mm",
-        type=float_in(0.0, 50.0),
-        default=2.0,
-        metavar="MM",
-        help="with --blind: the registered site's distance from the true one [mm] (default: 2)",
+    add_blind_arguments(
+        parser,
+        blind_help="observe a registered site and a jaw-sensed grasp instead of the simulation's truth",
+        default_mm=2.0,
+        error_help="the registered site's distance from the true one",
     )
     add_live_argument(parser)
     parser.add_argument(

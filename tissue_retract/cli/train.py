@@ -29,7 +29,8 @@ from hardware_if.registered_env import RegisteredTask
 from policies.config import TrainConfig
 from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
 from psm_control.errors import ConfigurationError
-from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, float_in, int_in
+from tissue_retract.cli._blind import add_blind_arguments
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, int_in
 
 __all__ = ["add_arguments", "parse_overrides", "run"]
 
@@ -65,17 +66,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", help="override a TrainConfig field (JSON value)"
     )
-    parser.add_argument(
-        "--blind",
-        action="store_true",
-        help="Tasks I-III: observe a registered site and a jaw-sensed grasp, rewarded by the true distance",
-    )
-    parser.add_argument(
-        "--registration-error-mm",
-        type=float_in(0.0, 50.0),
-        default=3.0,
-        metavar="MM",
-        help="with --blind: the largest registration error drawn per episode [mm] (default: 3)",
+    add_blind_arguments(
+        parser,
+        blind_help="observe a registered site and a jaw-sensed grasp, rewarded by the true distance",
+        default_mm=3.0,
+        error_help="the largest registration error drawn per episode",
     )
     parser.add_argument("--fresh", action="store_true", help="ignore an existing checkpoint in --out and start over")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
