@@ -234,6 +234,10 @@ class Tissue:
             collisionMargin=0.001,
             physicsClientId=client,
         )
+        # Bullet puts a body to sleep after 2 s below its speed threshold; a sleeping flap stays frozen while
+        # an anchored grasp drags one node through it (measured: a 2 cm lift moved the neighbours 0 mm, and
+        # the spring forces of that artefact read up to 2 N in an episode whose true peak was 0.2 N).
+        p.changeDynamics(self.body_id, -1, activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=client)
         visual: dict[str, object] = {"rgbaColor": list(params.rgba)}
         if params.texture_seed is not None:
             visual["textureUniqueId"] = p.loadTexture(texture_file(params.texture_seed), physicsClientId=client)

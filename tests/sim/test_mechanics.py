@@ -92,3 +92,24 @@ def test_strain_of_a_uniform_stretch() -> None:
         np.testing.assert_allclose(strain, 0.1, atol=1e-9)
     finally:
         p.disconnect(client)
+
+
+def test_flap_never_falls_asleep() -> None:
+    """After 5 s at rest (Bullet sleeps a body after 2 s), lifting one node still drags its neighbours."""
+    client = _world(9.81)
+    try:
+        tissue = Tissue(client, TissueParams(), np.zeros(3))
+        _settle(client, 5.0)
+        start = tissue.positions()
+        node, neighbour = 45, 44
+        holder = p.createMultiBody(0.0, -1, basePosition=start[node].tolist(), physicsClientId=client)
+        p.createSoftBodyAnchor(tissue.body_id, node, holder, -1, physicsClientId=client)
+        for step in range(240):
+            lifted = start[node] + np.array([0.0, 0.0, 0.02 * (step + 1) / 240])
+            p.resetBasePositionAndOrientation(holder, lifted.tolist(), (0, 0, 0, 1), physicsClientId=client)
+            p.stepSimulation(physicsClientId=client)
+        rise = tissue.positions()[[node, neighbour], 2] - start[[node, neighbour], 2]
+        assert rise[0] > 0.019
+        assert rise[1] > 0.005  # a sleeping flap leaves it where it was
+    finally:
+        p.disconnect(client)
