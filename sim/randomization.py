@@ -40,11 +40,11 @@ __all__ = [
     "Randomizer",
 ]
 
-#: Default ranges (low, high), SI units. Colours are RGB in [0, 1].
+#: Default ranges (low, high), SI units unless the name says otherwise. Colours are RGB in [0, 1].
 DEFAULT_RANGES: dict[str, tuple[float, float]] = {
-    "tissue_stiffness_n_per_m": (15.0, 30.0),
+    "tissue_youngs_modulus_kpa": (6.0, 14.0),
     "tissue_damping": (0.03, 0.08),
-    "tissue_mass_kg": (0.015, 0.025),
+    "tissue_density_kg_m3": (1000.0, 1100.0),
     "tissue_size_m": (0.07, 0.09),
     "tissue_color_r": (0.7, 0.95),
     "tissue_color_g": (0.3, 0.5),
@@ -64,6 +64,8 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "joint_offset_rad": (0.0, 0.0),
     "base_error_m": (0.0, 0.0),
     "tracking_lag": (0.0, 0.0),
+    # Drawn last, so that a thickness range leaves every other draw of a seed as it was.
+    "tissue_thickness_mm": (3.0, 3.0),
 }
 
 #: Parameters drawn as integers (inclusive range).

@@ -23,14 +23,17 @@ __all__ = [
     "check_relative_ranges",
     "disturbances",
     "episode_options",
+    "parameter_units",
     "sweep_parameters",
 ]
 
 #: Short names accepted on the command line.
 ALIASES: dict[str, str] = {
-    "stiffness": "tissue_stiffness_n_per_m",
+    "stiffness": "tissue_youngs_modulus_kpa",
+    "youngs_modulus": "tissue_youngs_modulus_kpa",
+    "thickness": "tissue_thickness_mm",
+    "density": "tissue_density_kg_m3",
     "damping": "tissue_damping",
-    "mass": "tissue_mass_kg",
     "size": "tissue_size_m",
     "gravity": "gravity_m_s2",
     "friction": "grip_friction",
@@ -39,6 +42,9 @@ ALIASES: dict[str, str] = {
     "joint_offset": "joint_offset_rad",
     "base_error": "base_error_m",
 }
+
+#: Units a range of these parameters may name (``youngs_modulus=2:30kpa``); the values are in them anyway.
+_UNITS = {"tissue_youngs_modulus_kpa": "kpa", "tissue_thickness_mm": "mm"}
 
 #: Disturbances (safe-control-gym style), all sampled per trial. Observation offsets are in metres
 #: (the observation is positions in metres), action offsets in normalised action units.
@@ -57,6 +63,13 @@ _IMPULSE_START, _IMPULSE_STEPS = 10, 3
 def sweep_parameters() -> tuple[str, ...]:
     """Every name a sweep can vary: randomization parameters, their short names, disturbances."""
     return (*ALIASES, *DEFAULT_RANGES, *DISTURBANCE_PARAMETERS)
+
+
+def parameter_units() -> dict[str, str]:
+    """The unit suffix each sweep name with a unit accepts, under its short and its full name."""
+    units = dict(_UNITS)
+    units.update({alias: _UNITS[full] for alias, full in ALIASES.items() if full in _UNITS})
+    return units
 
 
 def nominal(name: str) -> float:

@@ -130,8 +130,9 @@ class Scene:
         self.tissue_params = TissueParams(
             size_m=values["tissue_size_m"],
             resolution=tissue.resolution,
-            mass_kg=values["tissue_mass_kg"],
-            stiffness_n_per_m=values["tissue_stiffness_n_per_m"],
+            youngs_modulus_kpa=values["tissue_youngs_modulus_kpa"],
+            thickness_mm=values["tissue_thickness_mm"],
+            density_kg_m3=values["tissue_density_kg_m3"],
             damping=values["tissue_damping"],
             friction=tissue.friction,
             rgba=(values["tissue_color_r"], values["tissue_color_g"], values["tissue_color_b"], 1.0),

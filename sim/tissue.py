@@ -3,7 +3,9 @@
 The flap is a mass-spring cloth (``useMassSpring``), not an FEM volume: a retracted flap is thin, a
 cloth has one layer of nodes (tens, not hundreds, for the same area), and every spring's force is
 ``k (length - rest)`` along the spring, so the retraction force on the grasp can be computed exactly
-from the node positions (see :mod:`sim.mechanics`). PyBullet's deformable solver treats the elastic
+from the node positions (see :mod:`sim.mechanics`). Its material is given in physical units (Young's
+modulus, thickness, density); :mod:`sim.material` derives the spring constant of its lattice. PyBullet's
+deformable solver treats the elastic
 springs explicitly, so the stable time step shrinks as ``sqrt(node mass / k)``: a coarse mesh with
 heavier nodes is both faster and more stable than the 15 x 15 cloth of the paper's code.
 
@@ -32,6 +34,7 @@ import numpy as np
 import pybullet as p
 
 from psm_control.errors import ConfigurationError
+from sim.material import spring_stiffness_n_per_m
 
 __all__ = ["SITE_NAMES", "Tissue", "TissueParams", "grid_mesh", "texture_file", "texture_image"]
 
@@ -46,8 +49,9 @@ class TissueParams:
     Attributes:
         size_m: Side length of the square flap [m].
         resolution: Nodes per side (>= 4); the default 7 gives a 13 mm node spacing at 8 cm.
-        mass_kg: Total mass [kg] (8 x 8 x 0.3 cm of soft tissue is about 20 g).
-        stiffness_n_per_m: Elastic stiffness of every spring [N/m].
+        youngs_modulus_kpa: Young's modulus of the tissue [kPa] (in-plane, at small strain).
+        thickness_mm: Thickness of the flap [mm].
+        density_kg_m3: Density [kg/m^3] (soft tissue: about 1050).
         damping: Spring damping stiffness [N s/m].
         friction: Contact friction of the flap against rigid bodies.
         rgba: Display colour (multiplies the texture).
@@ -59,8 +63,9 @@ class TissueParams:
 
     size_m: float = 0.08
     resolution: int = 7
-    mass_kg: float = 0.02
-    stiffness_n_per_m: float = 20.0
+    youngs_modulus_kpa: float = 10.0
+    thickness_mm: float = 3.0
+    density_kg_m3: float = 1050.0
     damping: float = 0.05
     friction: float = 0.5
     rgba: tuple[float, float, float, float] = (0.85, 0.42, 0.42, 1.0)
@@ -71,15 +76,29 @@ class TissueParams:
     def __post_init__(self) -> None:
         if self.resolution < 4:
             raise ConfigurationError("resolution", self.resolution, "an integer >= 4 nodes per side")
-        for name in ("size_m", "mass_kg", "stiffness_n_per_m"):
+        for name in ("size_m", "youngs_modulus_kpa", "thickness_mm", "density_kg_m3"):
             if not getattr(self, name) > 0:
                 raise ConfigurationError(name, getattr(self, name), "a positive number")
         if self.damping < 0:
             raise ConfigurationError("damping", self.damping, "a non-negative number")
 
+    @property
+    def mass_kg(self) -> float:
+        """Total mass [kg]: density x area x thickness (8 x 8 x 0.3 cm at 1050 kg/m^3 is 20 g)."""
+        return self.density_kg_m3 * self.size_m**2 * self.thickness_mm * 1e-3
+
+    @property
+    def spring_stiffness_n_per_m(self) -> float:
+        """Stiffness of every spring of the lattice [N/m], from E and t (:mod:`sim.material`)."""
+        return spring_stiffness_n_per_m(self.youngs_modulus_kpa, self.thickness_mm, self.resolution)
+
 
 def grid_mesh(resolution: int, size_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (N, 3) and counter-clockwise triangles (T, 3) of a square grid in the z = 0 plane."""
+    """Vertices (N, 3) and counter-clockwise triangles (T, 3) of a square grid in the z = 0 plane.
+
+    Each cell is split by one diagonal, alternating in a checkerboard, so the lattice of its edges is
+    isotropic in the plane (:mod:`sim.material`).
+    """
     xs = np.linspace(-size_m / 2.0, size_m / 2.0, resolution)
     gx, gy = np.meshgrid(xs, xs)
     vertices = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
@@ -88,7 +107,10 @@ def grid_mesh(resolution: int, size_m: float) -> tuple[np.ndarray, np.ndarray]:
         for i in range(resolution - 1):
             a = j * resolution + i
             b, c = a + 1, a + resolution
-            triangles += [(a, b, c + 1), (a, c + 1, c)]
+            if (i + j) % 2 == 0:
+                triangles += [(a, b, c + 1), (a, c + 1, c)]
+            else:
+                triangles += [(a, b, c), (b, c + 1, c)]
     return vertices, np.array(triangles, dtype=int)
 
 
@@ -226,7 +248,7 @@ class Tissue:
             useMassSpring=1,
             useBendingSprings=0,
             useNeoHookean=0,
-            springElasticStiffness=params.stiffness_n_per_m,
+            springElasticStiffness=params.spring_stiffness_n_per_m,
             springDampingStiffness=params.damping,
             springDampingAllDirections=1,
             useSelfCollision=0,

@@ -333,7 +333,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
         def signals():
             return measure(
-                self._nodes, t.edges, t.rest_lengths, t.params.stiffness_n_per_m,
+                self._nodes, t.edges, t.rest_lengths, t.params.spring_stiffness_n_per_m,
                 s.grasp.nodes, t.node_mass_kg, s.gravity_m_s2, cfg.damage,
             )  # fmt: skip
 

@@ -5,7 +5,9 @@ Grammar of one range (comma-separated on the command line):
 * ``name=LOW:HIGH``   absolute values, sampled uniformly;
 * ``name=LOW:HIGHx``  multiples of the nominal value (``stiffness=0.3:3x``), sampled log-uniformly,
   since a factor of 0.3 is as far from nominal as a factor of 3.3;
-* ``name=VALUE``      a fixed value.
+* ``name=VALUE``      a fixed value;
+* ``name=LOW:HIGHkpa`` absolute values with their unit spelt out, for parameters that have one
+  (``youngs_modulus=2:30kpa``); another unit is refused, naming the parameter's.
 
 Every trial's parameters depend only on the sweep seed and the trial's index, never on the order in
 which trials run, so any backend and any resumption give the same trial the same parameters.
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Literal
@@ -93,12 +96,27 @@ def _number(field: str, text: str) -> float:
     return value
 
 
-def parse_ranges(text: str, valid_names: Iterable[str] | None = None) -> tuple[ParameterRange, ...]:
+def _strip_unit(name: str, spec: str, unit: str | None) -> str:
+    """``spec`` without its unit suffix; a suffix other than ``unit`` (or ``x``) is refused."""
+    match = re.fullmatch(r"(.*?)([A-Za-z]*)", spec)
+    body, suffix = (match.group(1), match.group(2)) if match else (spec, "")
+    if suffix in ("", "x"):
+        return spec
+    if unit is None or suffix.lower() != unit.lower():
+        allowed = f"LOW:HIGH{unit} or LOW:HIGHx" if unit else "LOW:HIGH or LOW:HIGHx, without a unit"
+        raise ConfigurationError(f"vary.{name}", spec, allowed)
+    return body
+
+
+def parse_ranges(
+    text: str, valid_names: Iterable[str] | None = None, units: Mapping[str, str] | None = None
+) -> tuple[ParameterRange, ...]:
     """Parse ``"stiffness=0.3:3x,obs_noise=0:0.002"`` into ranges.
 
     Args:
         text: Comma-separated ranges (grammar in the module docstring).
         valid_names: If given, names outside it raise :class:`UnknownVariantError` listing them.
+        units: The unit a parameter's absolute values may carry as a suffix (``{"youngs_modulus": "kpa"}``).
 
     Raises:
         ConfigurationError: Malformed item, non-numeric or inverted bounds, duplicate name,
@@ -117,6 +135,7 @@ def parse_ranges(text: str, valid_names: Iterable[str] | None = None) -> tuple[P
             raise UnknownVariantError("vary", name, valid)
         if any(r.name == name for r in ranges):
             raise ConfigurationError("vary", name, "each parameter at most once")
+        spec = _strip_unit(name, spec.strip(), (units or {}).get(name))
         relative = spec.endswith("x")
         low_text, colon, high_text = spec.rstrip("x").partition(":")
         low = _number(f"vary.{name}", low_text)

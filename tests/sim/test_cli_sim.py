@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
@@ -74,3 +75,24 @@ def test_bench_env_reports_rates(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     numbers = json.loads(path.read_text())
     assert numbers["env_steps_per_s"] > 0 and numbers["render_env_steps_per_s"] > 0
+
+
+def test_tissue_test_prints_and_writes_both_tests(tmp_path: Path) -> None:
+    """`tissue-test` measures tension within 10 % of E t W eps and writes both tests with their curves."""
+    out = tmp_path / "material.json"
+    result = _cli("tissue-test", "--tissue", "liver", "--size-mm", "60", "--json", str(out))
+    assert result.returncode == 0, result.stderr
+    assert "uniaxial tension to 10 %" in result.stdout and "picture-frame shear to 10 %" in result.stdout
+    document = json.loads(out.read_text())
+    assert document["material"]["youngs_modulus_kpa"] == 5.4 and document["material"]["preset"] == "liver"
+    uniaxial = document["uniaxial"]
+    assert uniaxial["expected_force_n"] == pytest.approx(5.4e3 * 5e-3 * 0.06 * 0.10)
+    assert abs(uniaxial["force_n"] / uniaxial["expected_force_n"] - 1.0) < 0.10
+    assert len(uniaxial["curve"]) == 10 and set(document["shear"]) >= {"force_n", "strain", "expected_force_n"}
+
+
+def test_tissue_test_refuses_an_unknown_preset() -> None:
+    """An unknown preset exits 1 with the preset names, and no traceback."""
+    result = _cli("tissue-test", "--tissue", "kidney")
+    assert result.returncode == 1
+    assert "liver" in result.stderr and "small-bowel" in result.stderr and "Traceback" not in result.stderr

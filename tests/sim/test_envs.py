@@ -76,7 +76,7 @@ def test_bad_actions_never_reach_physics(env: gym.Env) -> None:
 
 def test_unknown_options_list_the_valid_ones(env: gym.Env) -> None:
     """Unknown reset options and task ids raise errors that name the valid choices."""
-    with pytest.raises(UnknownVariantError, match="tissue_stiffness_n_per_m"):
+    with pytest.raises(UnknownVariantError, match="tissue_youngs_modulus_kpa"):
         env.reset(seed=0, options={"stifness": 3.0})
     with pytest.raises(UnknownVariantError, match="multisite"):
         gym_id("task4")
@@ -85,8 +85,8 @@ def test_unknown_options_list_the_valid_ones(env: gym.Env) -> None:
 def test_options_fix_parameters(env: gym.Env) -> None:
     """reset(options=...) fixes a randomization parameter, the site and the goal."""
     goal = np.array([0.0, 0.03, 0.05])
-    _, info = env.reset(seed=1, options={"tissue_stiffness_n_per_m": 22.5, "site": "left", "goal": goal})
-    assert info["randomization"]["tissue_stiffness_n_per_m"] == 22.5
+    _, info = env.reset(seed=1, options={"tissue_youngs_modulus_kpa": 12.5, "site": "left", "goal": goal})
+    assert info["randomization"]["tissue_youngs_modulus_kpa"] == 12.5
     assert info["site"] == "left"
     np.testing.assert_allclose(env.unwrapped.goal, goal)
 

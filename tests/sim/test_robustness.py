@@ -12,9 +12,9 @@ from tests.sim.conftest import make_env
 def test_same_seed_same_parameters() -> None:
     """The randomizer draws the same values from the same seed, and fixed values win."""
     randomizer = Randomizer()
-    a = randomizer.sample(np.random.default_rng(4), {"tissue_mass_kg": 0.02})
-    b = randomizer.sample(np.random.default_rng(4), {"tissue_mass_kg": 0.02})
-    assert a == b and a["tissue_mass_kg"] == 0.02
+    a = randomizer.sample(np.random.default_rng(4), {"tissue_density_kg_m3": 1050.0})
+    b = randomizer.sample(np.random.default_rng(4), {"tissue_density_kg_m3": 1050.0})
+    assert a == b and a["tissue_density_kg_m3"] == 1050.0
     assert set(a) == set(DEFAULT_RANGES)
 
 

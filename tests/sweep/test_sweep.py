@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from psm_control.errors import ConfigurationError, UnknownVariantError
+from sim.robustness import episode_options, parameter_units, sweep_parameters
 from sim.sweep import EpisodeStore, make_trials, parse_ranges, run_trials, wilson_interval
 from sim.sweep.report import write_report
 
@@ -38,6 +39,19 @@ def test_bad_ranges_are_refused(text: str) -> None:
     """Malformed, inverted, non-positive relative, duplicate or empty ranges raise ConfigurationError."""
     with pytest.raises(ConfigurationError):
         parse_ranges(text)
+
+
+def test_a_modulus_range_in_kpa() -> None:
+    """youngs_modulus=2:30kpa is the absolute range 2-30 kPa; another unit is refused, naming kPa."""
+    units = parameter_units()
+    (modulus,) = parse_ranges("youngs_modulus=2:30kpa", valid_names=sweep_parameters(), units=units)
+    assert (modulus.low, modulus.high, modulus.relative) == (2.0, 30.0, False)
+    assert episode_options({"youngs_modulus": 12.0}, {"youngs_modulus": False}) == {"tissue_youngs_modulus_kpa": 12.0}
+    assert episode_options({"stiffness": 2.0}, {"stiffness": True}) == {"tissue_youngs_modulus_kpa": 20.0}
+    with pytest.raises(ConfigurationError, match="kpa"):
+        parse_ranges("youngs_modulus=2:30mm", units=units)
+    with pytest.raises(ConfigurationError, match="without a unit"):
+        parse_ranges("size=0.07:0.09kpa", units=units)
 
 
 def test_unknown_parameter_lists_valid_ones() -> None:

@@ -29,6 +29,7 @@ SUBCOMMANDS: dict[str, str] = {
     "deploy": "deploy a policy to the simulation or a dVRK over ROS 2",
     "robustness": "randomized robustness evaluation of a policy",
     "tune-safety": "sweep safety limits and recommend a configuration",
+    "tissue-test": "tension and shear tests of the flap's material, against the closed forms",
     "reproduce": "train and evaluate the paper's Tables 1 and 2",
     "register": "register the grasp site by holding the jaws on it (for deploy --site)",
     "sim-dvrk": "serve the dVRK's CRTK topics from the simulation",

@@ -21,7 +21,7 @@ from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig, load_safety_config
 from sim.envs import gym_id
-from sim.robustness import check_relative_ranges, sweep_parameters
+from sim.robustness import check_relative_ranges, parameter_units, sweep_parameters
 from sim.sweep import EpisodeStore, cap_jobs, file_digest, make_trials, parse_ranges, prepare_output, run_trials
 from sim.sweep.report import summarize, write_report
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, int_in
@@ -71,7 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--vary",
         required=True,
         help="comma-separated NAME=LOW:HIGH (absolute), NAME=LOW:HIGHx (times nominal) or "
-        "NAME=VALUE, e.g. stiffness=0.3:3x,obs_noise=0:0.002,latency=0:3",
+        "NAME=VALUE, e.g. youngs_modulus=2:30kpa,obs_noise=0:0.002,latency=0:3 (stiffness=0.3:3x scales "
+        "the Young's modulus)",
     )
     parser.add_argument("--mode", choices=("random", "grid"), default="random", help="sampling (default random)")
     parser.add_argument("--no-safety", action="store_true", help="ablation: run without the safety filter")
@@ -106,7 +107,7 @@ def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write its files, print its summary."""
     task_id = gym_id(args.task)
-    ranges = parse_ranges(args.vary, valid_names=sweep_parameters())
+    ranges = parse_ranges(args.vary, valid_names=sweep_parameters(), units=parameter_units())
     check_relative_ranges(ranges)
     count = args.trials ** len(ranges) if args.mode == "grid" else args.trials
     if count > MAX_TRIALS:
