@@ -247,6 +247,9 @@ class Tissue:
             mass=params.mass_kg,
             useMassSpring=1,
             useBendingSprings=0,
+            # PyBullet's default (0.5) adds stiffness to every spring even without bending springs: measured,
+            # 0.3 N/m more membrane stiffness, a third of the sheet's at E t = 1 N/m, and missing from the force.
+            springBendingStiffness=0.0,
             useNeoHookean=0,
             springElasticStiffness=params.spring_stiffness_n_per_m,
             springDampingStiffness=params.damping,
