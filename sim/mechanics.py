@@ -16,7 +16,7 @@ import numpy as np
 
 from psm_control.errors import ConfigurationError
 
-__all__ = ["DamageLimits", "TissueSignals", "grasp_force", "measure", "spring_strain"]
+__all__ = ["DamageLimits", "TissueSignals", "grasp_force", "measure", "spring_forces", "spring_strain"]
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,19 @@ def spring_strain(positions: np.ndarray, edges: np.ndarray, rest_lengths: np.nda
     """Strain of every spring (length / rest - 1)."""
     lengths = np.linalg.norm(positions[edges[:, 1]] - positions[edges[:, 0]], axis=1)
     return lengths / rest_lengths - 1.0
+
+
+def spring_forces(
+    positions: np.ndarray, edges: np.ndarray, rest_lengths: np.ndarray, stiffness_n_per_m: float
+) -> np.ndarray:
+    """The force (N, 3) [N] the springs exert on every node: ``k (length - rest)`` along each spring."""
+    span = positions[edges[:, 1]] - positions[edges[:, 0]]
+    length = np.linalg.norm(span, axis=1)
+    pull = (stiffness_n_per_m * (length - rest_lengths) / np.maximum(length, 1e-12))[:, None] * span
+    forces = np.zeros_like(positions)
+    np.add.at(forces, edges[:, 0], pull)
+    np.add.at(forces, edges[:, 1], -pull)
+    return forces
 
 
 def grasp_force(

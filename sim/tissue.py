@@ -35,8 +35,9 @@ import pybullet as p
 
 from psm_control.errors import ConfigurationError
 from sim.material import spring_stiffness_n_per_m
+from sim.mechanics import spring_forces
 
-__all__ = ["SITE_NAMES", "Tissue", "TissueParams", "grid_mesh", "texture_file", "texture_image"]
+__all__ = ["SITE_NAMES", "Tissue", "TissueParams", "cached_file", "grid_mesh", "texture_file", "texture_image"]
 
 #: Grasp sites along the free edge, as in the paper's Task III.
 SITE_NAMES = ("centre", "left", "right")
@@ -204,6 +205,11 @@ def _remove_directory(pid: int, directory: str) -> None:
 _FILES = _Files()
 
 
+def cached_file(name: str, write: Callable[[str], None]) -> str:
+    """Path of this process's temporary file ``name``, written by ``write(path)`` once and cached."""
+    return _FILES.get(name, write)
+
+
 def texture_file(seed: int) -> str:
     """Path of the PNG of :func:`texture_image` for ``seed``, written once per process and cached."""
     seed = int(seed)
@@ -273,6 +279,7 @@ class Tissue:
         self.node_mass_kg = self._lumped_masses(vertices)
         n = params.resolution
         rows, cols = np.divmod(np.arange(n * n), n)
+        self.grid_rows, self.grid_cols = rows, cols
         self.pinned = np.flatnonzero((rows == 0) | (cols == 0) | (cols == n - 1)) if pin_edges else np.zeros(0, int)
         for node in self.pinned:
             p.createSoftBodyAnchor(self.body_id, int(node), -1, -1, physicsClientId=client)
@@ -297,6 +304,10 @@ class Tissue:
         """Current node positions (N, 3) in the world [m]."""
         _, nodes = p.getMeshData(self.body_id, -1, flags=p.MESH_DATA_SIMULATION_MESH, physicsClientId=self.client)
         return np.asarray(nodes, dtype=float)
+
+    def elastic_forces(self, positions: np.ndarray) -> np.ndarray:
+        """The elastic force (N, 3) [N] the springs exert on every node at ``positions``."""
+        return spring_forces(positions, self.edges, self.rest_lengths, self.params.spring_stiffness_n_per_m)
 
     def site_binding(self, local_point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The triangle holding a material point of the flat flap, and its barycentric weights."""

@@ -8,7 +8,10 @@ preset with ``--tissue``) as the simulation does, and runs two quasi-static test
 * picture-frame shear: the edges moved with a frame sheared by ``--strain``, against ``F = G t W gamma``
   with ``G = E / (2 (1 + nu))`` and the lattice's ``nu = 1/3``.
 
-It prints measured against expected and, with ``--json FILE``, writes both tests (force, strain, expected
+``--model fem`` runs them on PyBullet's Neo-Hookean tetrahedral plate of the same material instead of the
+simulated mass-spring flap (a reference; tens of times slower). ``--lift`` adds the flap's lift test (back
+and sides pinned, under gravity, the middle of the free edge raised 30 mm) on both models, side by side.
+It prints measured against expected and, with ``--json FILE``, writes every test (force, strain, expected
 force, the whole force-strain curve). ``--list`` prints the presets with their sources.
 """
 
@@ -18,8 +21,9 @@ import argparse
 import json
 
 from psm_control.inputs import check_output_path
+from sim.fem import FEM_POISSON_RATIO
 from sim.material import LATTICE_POISSON_RATIO, PRESETS, preset
-from sim.material_testing import picture_frame_shear, uniaxial_tension
+from sim.material_testing import MODELS, lift, picture_frame_shear, uniaxial_tension
 from sim.tissue import TissueParams
 from tissue_retract.cli._checks import float_in, int_in
 
@@ -48,20 +52,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--strain", type=float_in(0.0, 0.5, open_low=True), default=0.10, help="final strain, (0, 0.5] (default 0.1)"
     )
-    parser.add_argument("--json", metavar="FILE", default=None, help="write the material and both tests as JSON")
+    parser.add_argument("--model", choices=MODELS, default="spring", help="spring: the simulated flap (default); fem")
+    parser.add_argument("--lift", action="store_true", help="also lift the pinned flap 30 mm, spring and FEM")
+    parser.add_argument("--json", metavar="FILE", default=None, help="write the material and the tests as JSON")
     parser.add_argument("--list", action="store_true", help="list the presets with their sources and exit")
 
 
 def _material(args: argparse.Namespace) -> TissueParams:
-    """The sheet's settings: the preset's, then any value given on the command line."""
-    base = TissueParams(size_m=args.size_mm / 1000.0, resolution=args.resolution)
-    chosen = preset(args.tissue) if args.tissue else None
-    values = {
-        "youngs_modulus_kpa": args.youngs_kpa or (chosen.youngs_modulus_kpa if chosen else base.youngs_modulus_kpa),
-        "thickness_mm": args.thickness_mm or (chosen.thickness_mm if chosen else base.thickness_mm),
-        "density_kg_m3": args.density or (chosen.density_kg_m3 if chosen else base.density_kg_m3),
-    }
-    return TissueParams(size_m=base.size_m, resolution=base.resolution, **values)
+    """The sheet's settings: the preset's (or the flap's defaults), then any value given on the command line."""
+    source = preset(args.tissue) if args.tissue else TissueParams()
+    return TissueParams(
+        size_m=args.size_mm / 1000.0,
+        resolution=args.resolution,
+        youngs_modulus_kpa=args.youngs_kpa or source.youngs_modulus_kpa,
+        thickness_mm=args.thickness_mm or source.thickness_mm,
+        density_kg_m3=args.density or source.density_kg_m3,
+    )
 
 
 def _list() -> int:
@@ -78,21 +84,32 @@ def run(args: argparse.Namespace) -> int:
         return _list()
     output = check_output_path(args.json, "--json") if args.json else None
     params = _material(args)
+    model = next(m for m in MODELS if m == args.model)  # argparse's choices, typed
     print(
         f"material: E {params.youngs_modulus_kpa:g} kPa, t {params.thickness_mm:g} mm, "
         f"{params.density_kg_m3:g} kg/m^3; sheet {args.size_mm:g} x {args.size_mm:g} mm, "
         f"{params.resolution} x {params.resolution} nodes, spring {params.spring_stiffness_n_per_m:.4g} N/m, "
-        f"nu {LATTICE_POISSON_RATIO:.3g}",
+        f"{args.model} model",
         flush=True,
     )
-    tests = {"uniaxial": uniaxial_tension(params, args.strain), "shear": picture_frame_shear(params, args.strain)}
+    tests = {
+        "uniaxial": uniaxial_tension(params, args.strain, model),
+        "shear": picture_frame_shear(params, args.strain, model),
+    }
     labels = {"uniaxial": ("uniaxial tension", "E t W eps"), "shear": ("picture-frame shear", "G t W gamma")}
     for name, test in tests.items():
         label, form = labels[name]
         print(
             f"{label} to {100 * test.strain:g} %: {test.force_n:.5g} N measured, {test.expected_force_n:.5g} N "
-            f"closed form {form} ({100 * test.relative_error:+.1f} %)"
+            f"closed form {form} ({100 * test.relative_error:+.1f} %)",
+            flush=True,
         )
+    lifts = {model: lift(params, model=model) for model in MODELS} if args.lift else {}
+    if lifts:
+        print("lift [mm]  spring [N]  fem [N]  fem/spring")
+        for (height, spring), (_, fem) in zip(lifts["spring"], lifts["fem"], strict=True):
+            ratio = f"{fem / spring:.2f}" if spring > 0 else "-"
+            print(f"{1000 * height:9.0f}  {spring:10.4f}  {fem:7.4f}  {ratio:>10}")
     if output is not None:
         document = {
             "material": {
@@ -102,12 +119,14 @@ def run(args: argparse.Namespace) -> int:
                 "size_mm": args.size_mm,
                 "resolution": params.resolution,
                 "spring_stiffness_n_per_m": params.spring_stiffness_n_per_m,
-                "poisson_ratio": LATTICE_POISSON_RATIO,
+                "poisson_ratio": LATTICE_POISSON_RATIO if args.model == "spring" else FEM_POISSON_RATIO,
                 "preset": args.tissue,
             },
-            "model": "spring",
+            "model": args.model,
             **{name: test.to_dict() for name, test in tests.items()},
         }
+        if lifts:
+            document["lift"] = {model: [list(point) for point in curve] for model, curve in lifts.items()}
         output.write_text(json.dumps(document, indent=2) + "\n")
         print(f"written to {output}")
     return 0
