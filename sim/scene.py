@@ -151,7 +151,9 @@ class Scene:
         for link in range(-1, p.getNumJoints(self.body.body_id, physicsClientId=client)):
             # The arm is position-controlled and touches the tissue only through the grasp.
             p.setCollisionFilterGroupMask(self.body.body_id, link, 0, 0, physicsClientId=client)
-        self.grasp = Grasp(client, self.tissue.body_id, replace(grasp, friction=values["grip_friction"]))
+        self.grasp = Grasp(
+            client, self.tissue.body_id, self.tissue.triangles, replace(grasp, friction=values["grip_friction"])
+        )
 
     def _box(
         self, half_extents: np.ndarray | list[float], centre: np.ndarray | list[float], rgba: tuple[float, ...]
