@@ -27,6 +27,7 @@ from psm_control.frames import BaseTransform
 from psm_control.ik import DifferentialIk
 from psm_control.reductions import all_of
 from psm_control.robot import PsmModel
+from psm_control.urdf import GRASP_FRAME
 from safety.config import SafetyConfig
 from safety.filter import SafetyFilter
 from safety.limits import (
@@ -62,7 +63,7 @@ def default_limits(config: SafetyConfig) -> list[Limit]:
         RcmInsertionLimit(config.min_insertion_m, config.spec.dof),
         JointAccelerationLimit(config.acceleration, step, lower, upper),
         WorkspaceBoxLimit(np.asarray(config.workspace_min_m), np.asarray(config.workspace_max_m), config.cbf_gamma),
-        RetractionForceLimit(config.effective_force_limit_n, dof=step.size),
+        RetractionForceLimit(config.effective_force_limit_n, config.acceleration, config.jerk),
     ]
 
 
@@ -299,7 +300,9 @@ class ControlChain:
             dq_nominal = self.ik.solve(self._command_state, self._goal_local, lower, upper).dq
         force = -np.asarray(measured.force_n, dtype=float)  # force_n is the tissue's force on the tool
         tool = self._base.point(self._command_state.local_pose()[:3, 3])
-        stiffness = self.stiffness.update(tool, force)
+        # The stiffness is learned where the tissue is held: the wrist can move the jaws with the tip still.
+        held = self._base.point(self._command_state.frame_pose_local(GRASP_FRAME)[:3, 3])
+        stiffness = self.stiffness.update(held, force)
         interventions: tuple[str, ...] = ()
         intervened = active = 0
         if self.safety:
@@ -308,9 +311,11 @@ class ControlChain:
                 current.qd,
                 tool,
                 self._base.vectors(self._command_state.local_jacobian()[:3]),
+                self._base.vectors(self._command_state.local_jacobian(GRASP_FRAME)[:3]),
                 force,
                 stiffness,
                 self.control_period_s,
+                min(self._jaw, float(measured.jaw)),
             )
             try:
                 result = self.filter.filter(state, dq_nominal)

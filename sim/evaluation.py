@@ -17,7 +17,7 @@ from __future__ import annotations
 import functools
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -30,6 +30,8 @@ __all__ = [
     "Policy",
     "PolicyError",
     "check_start_inside_workspace",
+    "describe_exceedances",
+    "force_limit_summary",
     "run_episode",
     "summarize",
 ]
@@ -88,6 +90,13 @@ class EpisodeResult:
     safety_stops: int
     interventions: int
     invalid_actions: int = 0
+    force_limit_n: float = float("nan")
+    force_limit_exceeded: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def force_over_limit_s(self) -> float:
+        """Time spent above the force limit [s]."""
+        return float(sum(e["duration_s"] for e in self.force_limit_exceeded))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -116,7 +125,7 @@ def run_episode(
         action = _call_policy(functools.partial(policy, observation), seed, steps)
         observation, _, terminated, truncated, info = env.step(action)
         steps += 1
-        peak = max(peak, float(info["force_norm_n"]))
+        peak = max(peak, float(info["force_peak_n"]))
         for event in _SEVERITY:
             counts[event] += int(bool(info[event]))
         q = np.asarray(info["q"])
@@ -146,6 +155,8 @@ def run_episode(
         safety_stops=stops,
         interventions=interventions,
         invalid_actions=counts["invalid_action"],
+        force_limit_n=float(info["force_limit_n"]),
+        force_limit_exceeded=list(info["force_limit_exceeded"]),
     )
 
 
@@ -187,7 +198,32 @@ def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, A
         "safety_stops": int(sum(r.safety_stops for r in results)),
         "invalid_actions": int(sum(r.invalid_actions for r in results)),
         "interventions": int(sum(r.interventions for r in results)),
+        **force_limit_summary(results),
     }
+
+
+def force_limit_summary(results: Sequence[EpisodeResult]) -> dict[str, Any]:
+    """How often, how long and how far the force went past its limit, over ``results``."""
+    limit = max((r.force_limit_n for r in results), default=float("nan"))
+    ratios = [r.peak_force_n / r.force_limit_n for r in results if r.force_limit_n > 0]
+    return {
+        "force_limit_n": float(limit),
+        "force_limit_exceeded": int(sum(len(r.force_limit_exceeded) for r in results)),
+        "episodes_over_force_limit": int(sum(bool(r.force_limit_exceeded) for r in results)),
+        "force_over_limit_s": float(sum(r.force_over_limit_s for r in results)),
+        "worst_peak_to_limit": float(max(ratios)) if ratios else float("nan"),
+    }
+
+
+def describe_exceedances(summary: dict[str, Any]) -> str:
+    """``force_limit_exceeded`` of a summary in words: how often, in how many episodes, how long, how far."""
+    count = summary["force_limit_exceeded"]
+    if not count:
+        return "never"
+    return (
+        f"{count} x in {summary['episodes_over_force_limit']} episode(s), {summary['force_over_limit_s']:.2f} s "
+        f"in all, peak {summary['worst_peak_to_limit']:.2f} x the limit"
+    )
 
 
 def timed(function: Callable[[], Any]) -> tuple[Any, float]:

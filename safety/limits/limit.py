@@ -27,18 +27,23 @@ class FilterState(NamedTuple):
         qd: Commanded joint velocities (6,).
         tool_position_m: Tool-tip position in the base frame (3,) [m].
         tool_jacobian: Linear Jacobian of the tool tip in the base axes (3, 6).
+        grasp_jacobian: Linear Jacobian of the grasp point (midway along the jaws: where held tissue moves)
+            in the base axes (3, 6). The wrist can swing it while the tip stays put.
         retraction_force_n: Force the tool applies to the tissue (3,), base axes [N].
         stiffness_n_per_m: Current tissue stiffness estimate along the force direction [N/m].
         dt: Control period [s].
+        jaw_rad: The jaw's opening [rad], the smaller of commanded and measured (closed: it may hold tissue).
     """
 
     q: np.ndarray
     qd: np.ndarray
     tool_position_m: np.ndarray
     tool_jacobian: np.ndarray
+    grasp_jacobian: np.ndarray
     retraction_force_n: np.ndarray
     stiffness_n_per_m: float
     dt: float
+    jaw_rad: float = 0.0
 
 
 class LimitReport(NamedTuple):

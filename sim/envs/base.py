@@ -22,11 +22,12 @@ from psm_control.errors import UnknownVariantError
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
+from safety.force_watch import ForceLimitWatch
 from sim.backend import SimBackend
 from sim.control import make_controller
 from sim.exposure import exposed_fraction, surface_samples
 from sim.grasp import GraspParams
-from sim.mechanics import DamageLimits, measure
+from sim.mechanics import DamageLimits, grasp_force, measure
 from sim.randomization import INSERTION_M_PER_RAD, Randomizer
 from sim.rendering import Camera, Frame, render
 from sim.scene import HIDDEN_HALF_EXTENTS_M, PhysicsParams, Scene
@@ -171,6 +172,11 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             )
         self.controller.log.clear()
         self.controller.reset(self.backend.measure())
+        # Against the configured limit even with the filter off (the ablation shows what it would exceed).
+        self._force_watch = ForceLimitWatch(
+            self.controller.config.effective_force_limit_n, self.controller.control_period_s
+        )
+        self._ticks = 0
         self._nodes = self.scene.tissue.positions()
         self._exposure_points = surface_samples(self.scene.hidden_centre, HIDDEN_HALF_EXTENTS_M)
         self._eye = cfg.camera.eye(self.scene.tissue_origin)
@@ -206,6 +212,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         interventions: set[str] = set()
         per_tick = max(1, round(self.controller.control_period_s / cfg.physics.time_step_s))
         done = 0
+        peak = 0.0
         while done < cfg.physics.substeps:
             output = self.controller.tick(measured)
             if output.safety_stop:
@@ -221,7 +228,10 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             else:
                 self.scene.step_physics(count)
             done += count
-            measured = self._measured()
+            if done < cfg.physics.substeps:  # the step's last tick is measured below, with the grasp's update
+                self._force = self._held_force(self.scene.tissue.positions())
+                peak = max(peak, self._watch_tick())
+                measured = self._measured()
         previous = self._nodes
         self._nodes = self.scene.tissue.positions()
         unstable = self._unstable(previous, self._nodes)
@@ -230,7 +240,9 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.scene.grasp.release()
         else:
             self._update_tissue(events)
+        peak = max(peak, self._watch_tick())
         events.update(
+            force_peak_n=peak,
             sim_unstable=unstable,
             safety_stop=stops > 0,
             safety_stops=stops,
@@ -313,6 +325,21 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         events["action_clipped"] = bool(np.any(clipped != raw))
         self._last_jaw_action = float(clipped[4])
         return clipped
+
+    def _held_force(self, nodes: np.ndarray) -> np.ndarray:
+        """The force the tissue exerts on the jaws now (zero when they hold nothing) [N]."""
+        assert self.scene is not None
+        t = self.scene.tissue
+        return grasp_force(
+            nodes, t.edges, t.rest_lengths, t.params.spring_stiffness_n_per_m,
+            self.scene.grasp.nodes, t.node_mass_kg, self.scene.gravity_m_s2,
+        )  # fmt: skip
+
+    def _watch_tick(self) -> float:
+        """Give the force of the tick just simulated to the force-limit watch; return its magnitude [N]."""
+        self._ticks += 1
+        self._force_watch.update(self._force, self._ticks * self._force_watch.period_s)
+        return float(np.linalg.norm(self._force))
 
     def _measured(self) -> MeasuredState:
         self.backend.force_n = self._force
@@ -413,4 +440,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         info["safety_stops"] = int(events.get("safety_stops", 0))
         info["safety_reason"] = str(events.get("safety_reason", ""))
         info["interventions"] = tuple(events.get("interventions", ()))
+        info["force_peak_n"] = float(events.get("force_peak_n", info["force_norm_n"]))
+        info["force_limit_n"] = self._force_watch.limit_n
+        info["force_limit_exceeded"] = tuple(e.to_event() for e in self._force_watch.all())
         return info

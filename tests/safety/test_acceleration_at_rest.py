@@ -10,7 +10,7 @@ from safety.limits import FilterState, JointAccelerationLimit
 
 def _state(qd: float) -> FilterState:
     one = np.ones(1)
-    return FilterState(0 * one, qd * one, np.zeros(3), np.zeros((3, 1)), np.zeros(3), 100.0, 0.01)
+    return FilterState(0 * one, qd * one, np.zeros(3), np.zeros((3, 1)), np.zeros((3, 1)), np.zeros(3), 100.0, 0.01)
 
 
 @pytest.mark.parametrize("dust", [-2.9e-20, 1e-12, -5e-10])

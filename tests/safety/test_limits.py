@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from psm_control.robot import PsmModel
+from psm_control.urdf import GRASP_FRAME
 from safety.config import SafetyConfig
 from safety.filter import SafetyFilter
 from safety.limits import (
@@ -34,6 +35,7 @@ def _state(q: np.ndarray, qd: np.ndarray | None = None, force: np.ndarray | None
         np.zeros(6) if qd is None else np.asarray(qd, dtype=float),
         configuration.measured_pose()[:3, 3],
         configuration.base_jacobian()[:3],
+        configuration.base_jacobian(GRASP_FRAME)[:3],
         np.zeros(3) if force is None else np.asarray(force, dtype=float),
         400.0,
         _CONFIG.control_period_s,
@@ -135,15 +137,74 @@ def test_workspace_rows_are_a_control_barrier() -> None:
     assert limit.soft and not limit.joint_bounds
 
 
-def test_force_row_predicts_the_force_a_step_adds() -> None:
-    """The force row is K n^T J dq <= F_max - |F|, and unused below the smallest trusted force."""
-    limit = RetractionForceLimit(3.0)
-    G, h = limit.compute_qp_inequalities(_state(_MODEL.home(), force=np.array([0.0, 0.0, 0.01])))
-    assert np.all(G == 0.0) and h[0] == np.inf
+def _force_limit() -> RetractionForceLimit:
+    return RetractionForceLimit(3.0, _CONFIG.acceleration, _CONFIG.jerk)
+
+
+def test_force_rows_are_the_tangent_planes_of_the_limit_one_along_the_force() -> None:
+    """Rows K u^T J_grasp dq <= F_max - u^T F, 32 unit normals, the first along F; off with the jaw open, no force."""
+    limit = _force_limit()
     state = _state(_MODEL.home(), force=np.array([0.0, 2.0, 0.0]))
     G, h = limit.compute_qp_inequalities(state)
-    np.testing.assert_allclose(G[0], 400.0 * state.tool_jacobian[1])
+    assert G.shape == (32, 6) and h.shape == (32,)
+    normals = limit.directions(state.retraction_force_n)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0)
+    np.testing.assert_allclose(normals[0], [0.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(G, 400.0 * normals @ state.grasp_jacobian)
+    np.testing.assert_allclose(h, 3.0 - normals @ state.retraction_force_n)
     assert h[0] == pytest.approx(1.0)
+    opened = _state(_MODEL.home(), force=np.array([0.0, 0.0, 0.01]))._replace(jaw_rad=0.6)
+    G, h = limit.compute_qp_inequalities(opened)
+    assert np.all(G == 0.0) and np.all(h == np.inf)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    force=st.lists(st.floats(-4.0, 4.0), min_size=3, max_size=3),
+    step=st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
+)
+def test_any_step_the_rows_allow_keeps_the_predicted_force_within_1_084_of_the_limit(
+    force: list[float], step: list[float]
+) -> None:
+    """From a force within the limit, any grasp displacement meeting the 32 rows predicts |F + K dx| <= 1.084 F_max."""
+    limit = _force_limit()
+    F = np.asarray(force)
+    if np.linalg.norm(F) > 3.0:
+        F *= 3.0 / np.linalg.norm(F)
+    normals = limit.directions(F)
+    dx = np.asarray(step) * 0.01
+    predicted = F + 400.0 * dx
+    if np.all(normals @ predicted <= 3.0):
+        assert np.linalg.norm(predicted) <= 1.084 * 3.0
+
+
+def test_above_the_limit_standing_still_breaks_the_rows_and_backing_off_meets_them() -> None:
+    """At 1.5 x the limit, dq = 0 violates the row along the force; a step against the force meets them all."""
+    limit = _force_limit()
+    state = _state(_MODEL.home(), force=np.array([0.0, 0.0, 4.5]))
+    G, h = limit.compute_qp_inequalities(state)
+    assert h[0] < 0.0  # standing still is not enough
+    back = np.linalg.lstsq(state.grasp_jacobian, np.array([0.0, 0.0, -1.6 / 400.0]), rcond=None)[0]
+    assert np.all(G @ back <= h + 1e-9)
+
+
+def test_motion_under_way_counts_with_its_stopping_distance() -> None:
+    """A joint moving towards more force leaves less room: its braking distance enters every row."""
+    limit = _force_limit()
+    still = _state(_MODEL.home(), force=np.array([0.0, 0.0, 1.0]))
+    moving_qd = np.zeros(6)
+    moving_qd[2] = -0.05  # insertion out of the body: the grasp point rises, along the force
+    moving = still._replace(qd=moving_qd)
+    _, h_still = limit.compute_qp_inequalities(still)
+    h_still = h_still.copy()
+    _, h_moving = limit.compute_qp_inequalities(moving)
+    travel = limit.stopping_displacement(moving_qd)
+    assert travel[2] < 0.0 and travel[2] == pytest.approx(
+        -(0.05**2 / (2 * _CONFIG.acceleration[2]) + 0.05 * _CONFIG.acceleration[2] / (2 * _CONFIG.jerk[2]))
+    )
+    shift = 400.0 * limit.directions(still.retraction_force_n) @ (still.grasp_jacobian @ travel)
+    np.testing.assert_allclose(h_moving, h_still - shift)
+    assert h_moving[0] < h_still[0]
 
 
 def test_limit_report_says_active_and_how_much_the_nominal_violated() -> None:
