@@ -50,6 +50,7 @@ from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, Me
 from psm_control.errors import ConfigurationError
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
+from safety.force_watch import ForceLimitWatch
 from sim.evaluation import PolicyError, run_episode
 from sim.scene import PhysicsParams
 from sim.scene3d import PsmScene
@@ -197,6 +198,9 @@ class DeployReport:
     signal: str = ""
     holds: int = 0
     invalid_actions: int = 0
+    force_limit_n: float = float("nan")
+    force_limit_exceeded: int = 0
+    force_over_limit_s: float = 0.0
 
     @property
     def exit_code(self) -> int:
@@ -234,6 +238,13 @@ class DeployReport:
         out.append(f"  safety: {self.safety_stops} stop tick(s); interventions: {top}")
         out.append(f"  holds: {self.holds}; invalid actions: {self.invalid_actions}")
         out.append(f"  peak measured force {self.peak_force_n:.3f} N")
+        if self.force_limit_exceeded:
+            out.append(
+                f"  FORCE LIMIT {self.force_limit_n:g} N EXCEEDED {self.force_limit_exceeded} x, "
+                f"{self.force_over_limit_s:.2f} s in all (events force_limit_exceeded in the recording)"
+            )
+        else:
+            out.append(f"  force limit {self.force_limit_n:g} N: never exceeded")
         if self.dry_run:
             out.append(f"  predicted peak force {self.predicted_peak_force_n:.3f} N")
         if self.fault:
@@ -277,6 +288,16 @@ def _account(report: DeployReport, recorder: Recorder, output: ControlOutput) ->
     if output.safety_stop:
         report.safety_stops += 1
         recorder.write("/deploy/event", {"kind": "safety_stop", "text": output.reason})
+
+
+def _account_excursions(
+    report: DeployReport, recorder: Recorder, excursions: list[dict[str, Any]], episode: int
+) -> None:
+    """Record each ``force_limit_exceeded`` event of an episode and count it in the report."""
+    for event in excursions:
+        recorder.write("/deploy/event", {**event, "episode": episode})
+        report.force_limit_exceeded += 1
+        report.force_over_limit_s += float(event["duration_s"])
 
 
 def deploy(options: DeployOptions, *, echo: Any = print) -> DeployReport:
@@ -439,6 +460,8 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
             entry = {"episode": episode, **result.to_dict()}
             report.episodes.append(entry)
             report.invalid_actions += int(entry.get("invalid_actions", 0))
+            report.force_limit_n = result.force_limit_n
+            _account_excursions(report, recorder, result.force_limit_exceeded, episode)
             recorder.write("/deploy/event", {"kind": "episode_end", **entry})
             echo(f"episode {episode}: success={result.success} peak force {result.peak_force_n:.3f} N")
     finally:
@@ -557,69 +580,86 @@ def _dvrk_episode(
     chain.reset(measured)
     reset()
     recorder.write("/deploy/event", {"kind": "episode_start", "episode": episode, "seed": seed})
+    report.force_limit_n = chain.config.effective_force_limit_n
+    watch = ForceLimitWatch(report.force_limit_n, chain.control_period_s)
+    started = time.monotonic()
     peak = 0.0
     steps = 0
     next_tick = time.monotonic()
     step_end = time.monotonic()
-    for step in range(steps_total):
-        if step:  # the task state the arm's last commands produced, not an older one (up to one period late)
-            view.listener.wait(4 * chain.control_period_s, after_s=step_end)
-        observation = view.observation()
-        try:
-            action = np.clip(policy(observation), -1.0, 1.0)
-        except HoldError as e:
-            e.data.update(episode=episode, step=step, observation=observation)
-            raise
-        recorder.write(
-            "/deploy/action", {"episode": episode, "step": step, "action": action, "observation": observation}
-        )
-        jaw = cfg.jaw_closed_rad if action[4] < 0 else cfg.jaw_open_rad
-        step_rcm = rotation_rcm_to_base.T @ (action[:3] * cfg.max_step_m)
-        delta = CartesianDelta(step_rcm, float(action[3]) * cfg.max_yaw_rad, jaw, "local")
-        chain.set_target(delta, client.measure())
-        for _ in range(ticks_per_step):
-            with stopper.tick():
-                measured = client.measure()
-                output = chain.tick(measured)
-                force = float(np.linalg.norm(measured.force_n))
-                peak = max(peak, force)
-                report.peak_force_n = max(report.peak_force_n, force)
-                predicted = None
-                if options.dry_run:
-                    predicted = _predicted_force(view, measured, output.command, stiffness)
-                    report.predicted_peak_force_n = max(report.predicted_peak_force_n, predicted)
+    try:
+        for step in range(steps_total):
+            if step:  # the task state the arm's last commands produced, not an older one (up to one period late)
+                view.listener.wait(4 * chain.control_period_s, after_s=step_end)
+            observation = view.observation()
+            try:
+                action = np.clip(policy(observation), -1.0, 1.0)
+            except HoldError as e:
+                e.data.update(episode=episode, step=step, observation=observation)
+                raise
+            recorder.write(
+                "/deploy/action", {"episode": episode, "step": step, "action": action, "observation": observation}
+            )
+            jaw = cfg.jaw_closed_rad if action[4] < 0 else cfg.jaw_open_rad
+            step_rcm = rotation_rcm_to_base.T @ (action[:3] * cfg.max_step_m)
+            delta = CartesianDelta(step_rcm, float(action[3]) * cfg.max_yaw_rad, jaw, "local")
+            chain.set_target(delta, client.measure())
+            for _ in range(ticks_per_step):
+                with stopper.tick():
+                    measured = client.measure()
+                    output = chain.tick(measured)
+                    force = float(np.linalg.norm(measured.force_n))
+                    peak = max(peak, force)
+                    ended = watch.update(measured.force_n, time.monotonic() - started)
+                    if ended is not None:
+                        _account_excursions(report, recorder, [ended.to_event()], episode)
+                    report.peak_force_n = max(report.peak_force_n, force)
+                    predicted = None
+                    if options.dry_run:
+                        predicted = _predicted_force(view, measured, output.command, stiffness)
+                        report.predicted_peak_force_n = max(report.predicted_peak_force_n, predicted)
+                    else:
+                        client.servo_jp(output.command)
+                    status = client.status
+                    sent = not options.dry_run and not status.holding
+                    recorder.write("/deploy/measured", _measured_payload(measured))
+                    recorder.write("/deploy/command", _command_payload(output, sent, predicted))
+                    _account(report, recorder, output)
+                    report.commands_sent += int(sent)
+                    scene.tick(
+                        time.time(),
+                        measured.q,
+                        measured.jaw,
+                        commanded_q=output.command.q,
+                        commanded_jaw=output.command.jaw,
+                        site=_task_point(view.listener, "site"),
+                        goal=_task_point(view.listener, "goal"),
+                        grasp=scene.scene.grasp_point(measured.q, measured.jaw),
+                        force_n=measured.force_n,
+                    )
+                if not status.ok:  # the dry run holds as the deploy would: it rehearses the real thing
+                    fault = _deadman_hold(status.reason)
+                    fault.data.update(episode=episode, step=step, measured=_measured_payload(measured))
+                    raise fault
+                next_tick += chain.control_period_s
+                delay = next_tick - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
                 else:
-                    client.servo_jp(output.command)
-                status = client.status
-                sent = not options.dry_run and not status.holding
-                recorder.write("/deploy/measured", _measured_payload(measured))
-                recorder.write("/deploy/command", _command_payload(output, sent, predicted))
-                _account(report, recorder, output)
-                report.commands_sent += int(sent)
-                scene.tick(
-                    time.time(),
-                    measured.q,
-                    measured.jaw,
-                    commanded_q=output.command.q,
-                    commanded_jaw=output.command.jaw,
-                    site=_task_point(view.listener, "site"),
-                    goal=_task_point(view.listener, "goal"),
-                    grasp=scene.scene.grasp_point(measured.q, measured.jaw),
-                    force_n=measured.force_n,
-                )
-            if not status.ok:  # the dry run holds as the deploy would: it rehearses the real thing
-                fault = _deadman_hold(status.reason)
-                fault.data.update(episode=episode, step=step, measured=_measured_payload(measured))
-                raise fault
-            next_tick += chain.control_period_s
-            delay = next_tick - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            else:
-                next_tick = time.monotonic()  # behind: tick again at once, do not burst to catch up
-        steps += 1
-        step_end = time.monotonic()
-    entry: dict[str, Any] = {"episode": episode, "seed": seed, "steps": steps, "peak_force_n": peak}
+                    next_tick = time.monotonic()  # behind: tick again at once, do not burst to catch up
+            steps += 1
+            step_end = time.monotonic()
+    finally:  # an excursion a hold interrupts is recorded too
+        last = watch.finish()
+        if last is not None:
+            _account_excursions(report, recorder, [last.to_event()], episode)
+    entry: dict[str, Any] = {
+        "episode": episode,
+        "seed": seed,
+        "steps": steps,
+        "peak_force_n": peak,
+        "force_limit_exceeded": [e.to_event() for e in watch.excursions],
+    }
     try:
         success, distance = view.success()
         entry.update(success=bool(success), goal_distance_m=distance, success_source=view.listener.success_source)

@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 from hardware_if.crtk import JOINT_NAMES
 from hardware_if.recording import read_recording
 from psm_control.errors import ConfigurationError
+from safety.force_watch import FORCE_LIMIT_EXCEEDED
 
 __all__ = ["Recording", "RecordingSummary", "load_recording", "plot_recording", "summarize_recording"]
 
@@ -56,6 +57,7 @@ class RecordingSummary:
     target: str
     truncated: bool = False
     invalid_actions: int = 0
+    force_limit_exceeded: list[dict[str, Any]] = field(default_factory=list)
 
     def lines(self) -> list[str]:
         """The printed summary."""
@@ -72,6 +74,12 @@ class RecordingSummary:
             + "".join(f"\n  hold: {h}" for h in self.holds),
             f"peak force: {self.peak_force_n:.3f} N",
             f"invalid actions: {self.invalid_actions}",
+            f"force limit exceeded: {len(self.force_limit_exceeded)} x"
+            + "".join(
+                f"\n  episode {e.get('episode', '?')}: {e['peak_n']:.3f} N against {e['limit_n']:g} N "
+                f"for {e['duration_s']:.3f} s"
+                for e in self.force_limit_exceeded
+            ),
             ("command-to-arm distance max (dry run: nothing was sent) " if self.dry_run else "tracking error max ")
             + "|command(t-1) - measured(t)|: "
             + ", ".join(f"{n} {v:.4g}" for n, v in zip(JOINT_NAMES, self.tracking_error_max, strict=True)),
@@ -148,6 +156,7 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
         tracking = np.full(len(JOINT_NAMES), np.nan)
     holds = [str(e.get("text", "")) for e in rec.events if e.get("kind") in ("hold", "deadman", "interrupted")]
     invalid = sum(e.get("kind") == "invalid_action" for e in rec.events)
+    exceeded = [e for e in rec.events if e.get("kind") == FORCE_LIMIT_EXCEEDED]
     episodes = [e for e in rec.events if e.get("kind") == "episode_end"]
     return RecordingSummary(
         duration_s=duration,
@@ -162,6 +171,7 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
         target=str(rec.meta.get("target", "")),
         truncated=rec.truncated,
         invalid_actions=int(invalid),
+        force_limit_exceeded=exceeded,
     )
 
 

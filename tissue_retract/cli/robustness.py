@@ -200,6 +200,11 @@ def run(args: argparse.Namespace) -> int:
         f"{summary['peak_force_n']['max'] or 0:.3f} / {summary['peak_force_n']['p95'] or 0:.3f}",
     )
     table.add_row("safety stops / invalid actions", f"{summary['safety_stops']} / {summary['invalid_actions']}")
+    table.add_row(
+        "force limit exceeded",
+        f"{summary['force_limit_exceeded']} x in {summary['episodes_over_force_limit']} episodes, "
+        f"{summary['force_over_limit_s']:.2f} s",
+    )
     table.add_row("failure classes", ", ".join(f"{k} {v}" for k, v in summary["failure_classes"].items()))
     if summary["episodes_per_s"]:
         table.add_row("episodes/s (this run)", f"{summary['episodes_per_s']:.2f}")
