@@ -44,6 +44,8 @@ __all__ = ["FilterResult", "SafetyFilter"]
 
 _INFINITY = 1e30  # OSQP's OSQP_INFTY: bounds beyond it are infinite
 _SOLVED = ("solved", "solved inaccurate")
+#: Violated rows tried one by one for an exact projection before OSQP solves the whole QP.
+_PROJECTION_TRIES = 3
 
 
 class _Reports:
@@ -306,8 +308,18 @@ class SafetyFilter:
         solved = False
         self._iterations = 0
         projected = None
-        if violated == 1 and not self.naive:
+        if violated and not self.naive:
             projected = self._project_one_row(first_violated, z_nominal)
+            if projected is None and violated > 1:
+                # Several rows violated, often nearly parallel ones (the force limit's planes about the
+                # force): the projection onto the most violated may still meet all the others, and then
+                # it is the QP's solution as well (the feasible set lies within that row's half-space).
+                excess = self._G @ z - self._h
+                for row in np.argsort(-excess)[:_PROJECTION_TRIES].tolist():
+                    if row != first_violated and excess[row] > 0.0:
+                        projected = self._project_one_row(row, z_nominal)
+                        if projected is not None:
+                            break
         if projected is not None:
             z = projected
             solved = True
