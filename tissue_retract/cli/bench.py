@@ -1,4 +1,4 @@
-"""``tissue-retract bench TARGET``: speed measurements that print numbers.
+"""``tissue-retract bench TARGET``: measurements that print numbers (speed, faults, the force bound).
 
 Each target lives in its own module ``tissue_retract.cli.bench_<target>`` with ``add_arguments(parser)``
 and ``run(args) -> int``; every target takes ``--json FILE``.
@@ -16,6 +16,7 @@ TARGETS: dict[str, str] = {
     "chain": "control-chain tick latency against a naive reference",
     "ros": "servo_jp -> measured_js round trip over loopback ROS 2",
     "faults": "the deploy's fault matrix: fault -> exit status, hold reason, what the recording kept",
+    "safety": "the force bound: adversarial and shipped policies x tasks x force presets x tissue stiffness",
 }
 
 #: The targets are this command's own subcommands.
