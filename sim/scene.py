@@ -9,6 +9,7 @@ reset a soft body's nodes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
@@ -90,6 +91,31 @@ class PhysicsParams:
         return self.time_step_s * self.substeps
 
 
+#: The stiffest flap the default 1/240 s substeps hold (measured on the 7-node flap: 1 reset in 16 broke the
+#: flap at 22 kPa, none at 18 kPa; at 30 kPa 6 of 12 broke at 1/240 s and none at 1/480 s). Every flap of
+#: the default randomization (6-14 kPa, 70-90 mm, 1000-1100 kg/m^3) is within it.
+STABLE_AT_DEFAULT_STEP = TissueParams(youngs_modulus_kpa=20.0)
+
+
+def _node_frequency_sq(tissue: TissueParams) -> float:
+    """``k / m`` of a node of the flap [1/s^2]: a spring's stiffness over a node's share of the mass."""
+    return tissue.spring_stiffness_n_per_m * tissue.resolution**2 / tissue.mass_kg
+
+
+def stable_physics(physics: PhysicsParams, tissue: TissueParams) -> PhysicsParams:
+    """``physics`` with its substep split so that ``dt^2 k / m`` of the flap stays within the default's.
+
+    The mass-spring flap's stable substep scales with ``sqrt(m / k)`` of its nodes; the split is the
+    smallest whole number that brings ``k / m`` of this flap, per split substep, within that of
+    :data:`STABLE_AT_DEFAULT_STEP` at the default substep. The step and the control period stay the same.
+    """
+    ratio = _node_frequency_sq(tissue) / _node_frequency_sq(STABLE_AT_DEFAULT_STEP)
+    split = max(1, math.ceil(math.sqrt(ratio) * (physics.time_step_s * 240.0) - 1e-9))
+    if split == 1:
+        return physics
+    return replace(physics, time_step_s=physics.time_step_s / split, substeps=physics.substeps * split)
+
+
 class Scene:
     """Builds the scene for one episode in an existing physics client.
 
@@ -141,6 +167,9 @@ class Scene:
             site_inset_m=tissue.site_inset_m,
             site_spacing_m=tissue.site_spacing_m,
         )
+        # Stiffer or lighter flaps need finer substeps: set before the flap is loaded and settled.
+        self.physics = physics = stable_physics(physics, self.tissue_params)
+        p.setPhysicsEngineParameter(fixedTimeStep=physics.time_step_s, physicsClientId=client)
         self.tissue = Tissue(client, self.tissue_params, self.tissue_origin)
         self.rcm_position = self.tissue_origin + np.array(
             [values["rcm_x_m"], 0.02 + values["rcm_y_m"], _RCM_ABOVE_FLAP_M + values["rcm_z_m"]]

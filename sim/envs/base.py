@@ -170,7 +170,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             cfg.jaw_open_rad,
             joint_offset=self._joint_offset,
             tracking_lag=self.values["tracking_lag"],
-            substep_s=cfg.physics.time_step_s,
+            substep_s=self.scene.physics.time_step_s,
         )
         if self.controller is None:  # built once: the chain's QP workspaces outlive episodes
             self.controller, self.controller_name = make_controller(
@@ -219,17 +219,18 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.controller.set_target(delta, measured)
         stops, reasons = 0, []
         interventions: set[str] = set()
-        per_tick = max(1, round(self.controller.control_period_s / cfg.physics.time_step_s))
+        physics = self.scene.physics  # the substeps this flap needs (sim.scene.stable_physics)
+        per_tick = max(1, round(self.controller.control_period_s / physics.time_step_s))
         done = 0
         peak = 0.0
-        while done < cfg.physics.substeps:
+        while done < physics.substeps:
             output = self.controller.tick(measured)
             if output.safety_stop:
                 stops += 1
                 reasons.append(output.reason)
             interventions.update(output.interventions)
             self.backend.servo_jp(output.command)
-            count = min(per_tick, cfg.physics.substeps - done)
+            count = min(per_tick, physics.substeps - done)
             if self.backend.lagging:  # the arm moves during the substeps, so step them one by one
                 for _ in range(count):
                     self.backend.advance()
@@ -237,7 +238,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             else:
                 self.scene.step_physics(count)
             done += count
-            if done < cfg.physics.substeps:  # the step's last tick is measured below, with the grasp's update
+            if done < physics.substeps:  # the step's last tick is measured below, with the grasp's update
                 self._force = self._held_force(self.scene.tissue.positions())
                 peak = max(peak, self._watch_tick())
                 measured = self._measured()
