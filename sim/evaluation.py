@@ -15,8 +15,9 @@ chain's stopped ticks and the constraints that changed a command (once per const
 from __future__ import annotations
 
 import functools
+import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -198,20 +199,25 @@ def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, A
         "safety_stops": int(sum(r.safety_stops for r in results)),
         "invalid_actions": int(sum(r.invalid_actions for r in results)),
         "interventions": int(sum(r.interventions for r in results)),
-        **force_limit_summary(results),
+        **force_limit_summary([r.to_dict() for r in results]),
     }
 
 
-def force_limit_summary(results: Sequence[EpisodeResult]) -> dict[str, Any]:
-    """How often, how long and how far the force went past its limit, over ``results``."""
-    limit = max((r.force_limit_n for r in results), default=float("nan"))
-    ratios = [r.peak_force_n / r.force_limit_n for r in results if r.force_limit_n > 0]
+def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """How often, how long and how far the force went past its limit, over episode records.
+
+    The records are :meth:`EpisodeResult.to_dict` entries, as evaluate keeps them and sweeps store them
+    (a record from before the force was watched counts as none).
+    """
+    limits = [float(r.get("force_limit_n", math.nan)) for r in episodes]
+    ratios = [float(r["peak_force_n"]) / limit for r, limit in zip(episodes, limits, strict=True) if limit > 0]
+    excursions = [r.get("force_limit_exceeded") or () for r in episodes]
     return {
-        "force_limit_n": float(limit),
-        "force_limit_exceeded": int(sum(len(r.force_limit_exceeded) for r in results)),
-        "episodes_over_force_limit": int(sum(bool(r.force_limit_exceeded) for r in results)),
-        "force_over_limit_s": float(sum(r.force_over_limit_s for r in results)),
-        "worst_peak_to_limit": float(max(ratios)) if ratios else float("nan"),
+        "force_limit_n": max(limits, default=math.nan),
+        "force_limit_exceeded": sum(len(e) for e in excursions),
+        "episodes_over_force_limit": sum(bool(e) for e in excursions),
+        "force_over_limit_s": float(sum(float(x["duration_s"]) for e in excursions for x in e)),
+        "worst_peak_to_limit": max(ratios, default=math.nan),
     }
 
 

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FormatStrFormatter, FuncFormatter
 
 from psm_control import __version__
-from sim.evaluation import FAILURE_CLASSES
+from sim.evaluation import FAILURE_CLASSES, describe_exceedances, force_limit_summary
 from sim.sweep.page import Page, percent, percent_interval, quantity
 from sim.sweep.space import ParameterRange
 from sim.sweep.stats import binned_success, wilson_interval
@@ -43,11 +43,7 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
         },
         "safety_stops": sum(int(r.get("safety_stops") or 0) for r in finished),
         "invalid_actions": sum(int(r.get("invalid_actions") or 0) for r in finished),
-        "force_limit_exceeded": sum(len(r.get("force_limit_exceeded") or ()) for r in finished),
-        "episodes_over_force_limit": sum(bool(r.get("force_limit_exceeded")) for r in finished),
-        "force_over_limit_s": sum(
-            float(e["duration_s"]) for r in finished for e in (r.get("force_limit_exceeded") or ())
-        ),
+        **force_limit_summary(finished),
         "interventions": dict(sorted(interventions.items())),
         "failure_classes": dict(sorted(Counter(str(r.get("failure_class", "none")) for r in finished).items())),
     }
@@ -201,11 +197,7 @@ def write_report(
         ),
         ("safety stops", f"{summary['safety_stops']} ticks"),
         ("invalid actions", f"{summary['invalid_actions']} (held; the jaw kept)"),
-        (
-            "force limit exceeded",
-            f"{summary['force_limit_exceeded']} x in {summary['episodes_over_force_limit']} episodes, "
-            f"{summary['force_over_limit_s']:.2f} s in all",
-        ),
+        ("force limit exceeded", describe_exceedances(summary)),
         ("interventions", _counts(summary["interventions"])),
         ("failure classes", _counts(summary["failure_classes"])),
         ("package", f"tissue-retract {__version__}"),
