@@ -31,6 +31,7 @@ import collections
 import contextlib
 import dataclasses
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -50,7 +51,7 @@ from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, Me
 from psm_control.errors import ConfigurationError
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
-from safety.force_watch import ForceLimitWatch
+from safety.force_watch import FORCE_LIMIT_STALL, ForceLimitWatch
 from sim.evaluation import PolicyError, run_episode
 from sim.scene import PhysicsParams
 from sim.scene3d import PsmScene
@@ -201,6 +202,7 @@ class DeployReport:
     force_limit_n: float = float("nan")
     force_limit_exceeded: int = 0
     force_over_limit_s: float = 0.0
+    force_limit_stalls: int = 0
 
     @property
     def exit_code(self) -> int:
@@ -245,6 +247,11 @@ class DeployReport:
             )
         else:
             out.append(f"  force limit {self.force_limit_n:g} N: never exceeded")
+        if self.force_limit_stalls:
+            out.append(
+                f"  the force limit stalled the retraction in {self.force_limit_stalls} episode(s) "
+                "(force_limit_stall events in the recording; the warnings above say what holding the tissue cost)"
+            )
         if self.dry_run:
             out.append(f"  predicted peak force {self.predicted_peak_force_n:.3f} N")
         if self.fault:
@@ -288,6 +295,10 @@ def _account(report: DeployReport, recorder: Recorder, output: ControlOutput) ->
     if output.safety_stop:
         report.safety_stops += 1
         recorder.write("/deploy/event", {"kind": "safety_stop", "text": output.reason})
+    for event in output.events:  # the chain's warnings: said at once, kept in the recording, counted
+        recorder.write("/deploy/event", {**event, "episode": len(report.episodes)})
+        print(f"WARNING: {event['text']}", file=sys.stderr, flush=True)
+        report.force_limit_stalls += event["kind"] == FORCE_LIMIT_STALL
 
 
 def _account_excursions(

@@ -73,6 +73,7 @@ _LOGGED_EVENTS = {
     "error": True,
     "interrupted": True,
     "safety_stop": True,
+    "force_limit_stall": True,
     "episode_start": False,
     "episode_end": False,
 }

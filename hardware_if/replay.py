@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from hardware_if.crtk import JOINT_NAMES
 from hardware_if.recording import read_recording
 from psm_control.errors import ConfigurationError
-from safety.force_watch import FORCE_LIMIT_EXCEEDED
+from safety.force_watch import FORCE_LIMIT_EXCEEDED, FORCE_LIMIT_STALL
 
 __all__ = ["Recording", "RecordingSummary", "load_recording", "plot_recording", "summarize_recording"]
 
@@ -58,6 +58,7 @@ class RecordingSummary:
     truncated: bool = False
     invalid_actions: int = 0
     force_limit_exceeded: list[dict[str, Any]] = field(default_factory=list)
+    force_limit_stalls: list[dict[str, Any]] = field(default_factory=list)
 
     def lines(self) -> list[str]:
         """The printed summary."""
@@ -79,6 +80,12 @@ class RecordingSummary:
                 f"\n  episode {e.get('episode', '?')}: {e['peak_n']:.3f} N against {e['limit_n']:g} N "
                 f"for {e['duration_s']:.3f} s"
                 for e in self.force_limit_exceeded
+            ),
+            f"force limit stalled the retraction: {len(self.force_limit_stalls)} x"
+            + "".join(
+                f"\n  episode {e.get('episode', '?')}: held to {1000 * e['speed_m_s']:.0f} mm/s, holding the "
+                f"tissue cost {e['static_load_n']:.3f} N against {e['limit_n']:g} N"
+                for e in self.force_limit_stalls
             ),
             ("command-to-arm distance max (dry run: nothing was sent) " if self.dry_run else "tracking error max ")
             + "|command(t-1) - measured(t)|: "
@@ -157,6 +164,7 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
     holds = [str(e.get("text", "")) for e in rec.events if e.get("kind") in ("hold", "deadman", "interrupted")]
     invalid = sum(e.get("kind") == "invalid_action" for e in rec.events)
     exceeded = [e for e in rec.events if e.get("kind") == FORCE_LIMIT_EXCEEDED]
+    stalls = [e for e in rec.events if e.get("kind") == FORCE_LIMIT_STALL]
     episodes = [e for e in rec.events if e.get("kind") == "episode_end"]
     return RecordingSummary(
         duration_s=duration,
@@ -172,6 +180,7 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
         truncated=rec.truncated,
         invalid_actions=int(invalid),
         force_limit_exceeded=exceeded,
+        force_limit_stalls=stalls,
     )
 
 

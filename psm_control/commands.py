@@ -7,7 +7,7 @@ The same objects are used in simulation and on hardware.
 
 from __future__ import annotations
 
-from typing import Literal, NamedTuple, Protocol
+from typing import Any, Literal, NamedTuple, Protocol
 
 import numpy as np
 
@@ -74,12 +74,15 @@ class ControlOutput(NamedTuple):
         safety_stop: True when the tick refused to move and held position.
         reason: Why it stopped ("" when it did not).
         interventions: Names of the safety constraints that changed the command this tick.
+        events: What this tick found that the user must hear of and the recording keep: JSON-ready dicts
+            with a ``kind`` and a ``text`` for the user.
     """
 
     command: JointCommand
     safety_stop: bool = False
     reason: str = ""
     interventions: tuple[str, ...] = ()
+    events: tuple[dict[str, Any], ...] = ()
 
 
 class Controller(Protocol):

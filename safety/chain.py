@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import Any
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from psm_control.robot import PsmModel
 from psm_control.urdf import GRASP_FRAME
 from safety.config import SafetyConfig
 from safety.filter import SafetyFilter
+from safety.force_watch import ForceLimitStallWatch
 from safety.limits import (
     FilterState,
     JointAccelerationLimit,
@@ -39,6 +41,7 @@ from safety.limits import (
     RcmInsertionLimit,
     RetractionForceLimit,
     WorkspaceBoxLimit,
+    may_hold_tissue,
 )
 from safety.log import SafetyLog
 from safety.smoother import JointSmoother
@@ -132,6 +135,7 @@ class ControlChain:
             forgetting=self.config.stiffness_forgetting,
         )
         self.log = SafetyLog(tuple(limit.name for limit in self.limits), self.control_period_s, self.model.dof)
+        self.stall_watch = ForceLimitStallWatch(self.config.effective_force_limit_n, self.control_period_s)
         self._goal_local: np.ndarray | None = None
         self._jaw_goal = 0.0
         self._jaw = 0.0
@@ -163,6 +167,7 @@ class ControlChain:
         self.stiffness.reset()
         self.ik.reset()
         self.filter.reset()
+        self.stall_watch.reset()
         self._is_reset = True
         self._stamp = float(measured.stamp_s) if np.isfinite(measured.stamp_s) else 0.0
         try:
@@ -304,6 +309,7 @@ class ControlChain:
         held = self._base.point(self._command_state.frame_pose_local(GRASP_FRAME)[:3, 3])
         stiffness = self.stiffness.update(held, force)
         interventions: tuple[str, ...] = ()
+        events: tuple[dict[str, Any], ...] = ()
         intervened = active = 0
         if self.safety:
             state = FilterState(
@@ -325,6 +331,19 @@ class ControlChain:
             interventions = result.interventions
             intervened = result.intervened_mask
             active = result.active_mask
+            holding = may_hold_tissue(state.jaw_rad, force)
+            grasp_jacobian = state.grasp_jacobian  # the grasp point's motion matters only with tissue held
+            stall = self.stall_watch.update(
+                holding=holding,
+                held_back=RetractionForceLimit.name in interventions,
+                force_n=math.sqrt(float(force @ force)),
+                asked_m=float(np.linalg.norm(grasp_jacobian @ dq_nominal)) if holding else 0.0,
+                allowed_m=float(np.linalg.norm(grasp_jacobian @ dq)) if holding else 0.0,
+                stiffness_n_per_m=stiffness,
+                stamp_s=self._stamp,
+            )
+            if stall is not None:
+                events = (stall.to_event(),)
         else:
             dq = dq_nominal
         try:
@@ -347,4 +366,4 @@ class ControlChain:
             force_n=math.sqrt(float(force @ force)),
             stiffness_n_per_m=stiffness,
         )
-        return ControlOutput(candidate, False, "", interventions)
+        return ControlOutput(candidate, False, "", interventions, events)

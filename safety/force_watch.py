@@ -1,24 +1,42 @@
-"""Every stretch of time the measured retraction force spends above its limit, with its amount and duration.
+"""What the retraction-force limit did: each excursion above it, and a retraction it held back.
 
 The force limit is a soft row of the safety filter: a force already above the limit takes steps to relax,
-and a limit below what holding the tissue costs cannot be met at all. Neither may pass unseen. A
-:class:`ForceLimitWatch` takes the measured force of every control tick and reports each excursion above
-the limit (:class:`ForceExcursion`: when it began, how long it lasted, its peak) so that evaluate, deploy,
-sweeps and recordings count it as a ``force_limit_exceeded`` event.
+and a limit below what holding the tissue costs cannot be met at all. Neither may pass unseen.
+
+- A :class:`ForceLimitWatch` takes the measured force of every control tick and reports each excursion
+  above the limit (:class:`ForceExcursion`: when it began, how long it lasted, its peak) so that evaluate,
+  deploy, sweeps and recordings count it as a ``force_limit_exceeded`` event.
+- A :class:`ForceLimitStallWatch` tells when the limit, not the policy, stops the retraction: for a
+  second with tissue in the jaws the filter cut the policy's motion for the force on nearly every tick
+  and the grasp point crawled (below :data:`STALL_SPEED_M_S`). The bound is then kept by not lifting and
+  the task stalls; the ``force_limit_stall`` event (:class:`ForceLimitStall`) names the load the held
+  tissue put on the jaws meanwhile, its static load where the tool was held, so that a user sees a limit
+  set below what the retraction costs.
 """
 
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-__all__ = ["FORCE_LIMIT_EXCEEDED", "ForceExcursion", "ForceLimitWatch"]
+__all__ = [
+    "FORCE_LIMIT_EXCEEDED",
+    "FORCE_LIMIT_STALL",
+    "STALL_SPEED_M_S",
+    "ForceExcursion",
+    "ForceLimitStall",
+    "ForceLimitStallWatch",
+    "ForceLimitWatch",
+]
 
-#: The event's name in recordings and summaries.
+#: The excursion event's name in recordings and summaries.
 FORCE_LIMIT_EXCEEDED = "force_limit_exceeded"
+#: The stall event's name in recordings and summaries.
+FORCE_LIMIT_STALL = "force_limit_stall"
 
 
 @dataclass(frozen=True)
@@ -120,3 +138,154 @@ class ForceLimitWatch:
 
     def _current(self, *, open_: bool) -> ForceExcursion:
         return ForceExcursion(self._start, self._ticks * self.period_s, self._peak, self.limit_n, open_)
+
+
+#: A retraction the limit slows below this is stalled [m/s]: measured on the tasks (expert, 1 s windows
+#: after the grasp) the grasp point moved at 11-17 mm/s under limits of 0.05 and 0.1 N, where the
+#: retraction never finished, and at 34-39 mm/s under the nerve preset's 0.4 N, where it did.
+STALL_SPEED_M_S = 0.025
+
+
+@dataclass(frozen=True)
+class ForceLimitStall:
+    """The force limit held the retraction back to a crawl for a whole window while the jaws held tissue.
+
+    Attributes:
+        start_s: Time of the window's first tick [s].
+        duration_s: The window [s].
+        static_load_n: Median force the held tissue put on the jaws over the window's last quarter [N]:
+            what holding it where the filter kept the tool costs.
+        load_rise_n: How much that load grew over the window (last quarter's median less the first's) [N].
+        limit_n: The force limit [N].
+        speed_m_s: The grasp point's mean speed over the window, as the filter let it move [m/s].
+        asked_speed_m_s: The mean speed the policy asked for [m/s].
+        stiffness_n_per_m: The tissue stiffness the filter assumed at the window's last tick [N/m].
+    """
+
+    start_s: float
+    duration_s: float
+    static_load_n: float
+    load_rise_n: float
+    limit_n: float
+    speed_m_s: float
+    asked_speed_m_s: float
+    stiffness_n_per_m: float
+
+    def to_event(self) -> dict[str, Any]:
+        """The ``force_limit_stall`` event, JSON-ready, with the warning for the user as ``text``."""
+        return {
+            "kind": FORCE_LIMIT_STALL,
+            "start_s": self.start_s,
+            "duration_s": self.duration_s,
+            "static_load_n": self.static_load_n,
+            "load_rise_n": self.load_rise_n,
+            "limit_n": self.limit_n,
+            "speed_m_s": self.speed_m_s,
+            "asked_speed_m_s": self.asked_speed_m_s,
+            "stiffness_n_per_m": self.stiffness_n_per_m,
+            "text": self.warning(),
+        }
+
+    def warning(self) -> str:
+        """The warning for the user: what happened, what it means, what to change."""
+        left_n = max(0.0, self.limit_n - self.static_load_n)
+        return (
+            f"force limit {self.limit_n:g} N stalls the retraction: for {self.duration_s:.1f} s with tissue in "
+            f"the jaws the safety filter held it to {1000 * self.speed_m_s:.0f} mm/s (the policy asked for "
+            f"{1000 * self.asked_speed_m_s:.0f}). Holding the tissue there costs {self.static_load_n:.3f} N "
+            f"({100 * self.static_load_n / self.limit_n:.0f} % of the limit, up {self.load_rise_n:.3f} N in that "
+            f"time); at the {self.stiffness_n_per_m:.0f} N/m the filter assumes for the tissue, the {left_n:.3f} N "
+            f"left allow {1000 * left_n / self.stiffness_n_per_m:.2f} mm more pull. The bound is kept by not "
+            "lifting, so a retraction that takes more than the limit stops here: raise force_limit_n "
+            "(--safety-config) if the tissue allows it"
+        )
+
+
+class ForceLimitStallWatch:
+    """Tells, once per episode, when the force limit stalls the retraction (see the module notes).
+
+    A stall is a window of ticks with the jaws holding tissue in which the limit cut the policy's motion
+    on nearly every tick and the grasp point crawled: a limit that trims a pull now and then, or slows a
+    retraction that still gets on, is the filter doing its work and is not reported.
+
+    Args:
+        limit_n: The force limit [N].
+        period_s: The control period [s].
+        window_s: How long the limit must hold the motion back [s].
+        held_back: Fraction of the window's ticks on which it must cut the policy's motion (a tick it lets
+            through does not end a stall: the filter lets a step through as the force relaxes).
+        stall_speed_m_s: The grasp point's mean speed over the window must be below this [m/s].
+    """
+
+    def __init__(
+        self,
+        limit_n: float,
+        period_s: float,
+        *,
+        window_s: float = 1.0,
+        held_back: float = 0.9,
+        stall_speed_m_s: float = STALL_SPEED_M_S,
+    ) -> None:
+        self.limit_n = float(limit_n)
+        self.period_s = float(period_s)
+        self._size = max(1, math.ceil(window_s / period_s - 1e-9))
+        self._duration_s = self._size * self.period_s
+        self._needed = math.ceil(held_back * self._size - 1e-9)
+        self._stall_distance_m = stall_speed_m_s * self._duration_s
+        #: Per tick: counted (held back with tissue held), force [N], time [s], asked and allowed motion [m].
+        self._window: collections.deque[tuple[bool, float, float, float, float]] = collections.deque(maxlen=self._size)
+        self._count = 0
+        self.stall: ForceLimitStall | None = None
+
+    def reset(self) -> None:
+        """A new episode: forget the window and the stall."""
+        self._window.clear()
+        self._count = 0
+        self.stall = None
+
+    def update(
+        self,
+        *,
+        holding: bool,
+        held_back: bool,
+        force_n: float,
+        asked_m: float,
+        allowed_m: float,
+        stiffness_n_per_m: float,
+        stamp_s: float,
+    ) -> ForceLimitStall | None:
+        """Take one tick; return the stall on the tick it is first seen (at most once until :meth:`reset`).
+
+        Args:
+            holding: The jaws may hold tissue this tick.
+            held_back: The force limit cut the policy's motion this tick.
+            force_n: The measured force magnitude [N].
+            asked_m: How far the policy's step would move the grasp point [m].
+            allowed_m: How far the filtered step moves it [m].
+            stiffness_n_per_m: The tissue stiffness the filter assumes this tick [N/m].
+            stamp_s: The tick's time [s].
+        """
+        counted = bool(holding and held_back and math.isfinite(force_n))
+        if len(self._window) == self._size:
+            self._count -= self._window[0][0]
+        self._window.append((counted, float(force_n), float(stamp_s), float(asked_m), float(allowed_m)))
+        self._count += counted
+        if self.stall is not None or len(self._window) < self._size or self._count < self._needed:
+            return None
+        allowed = sum(entry[4] for entry in self._window)
+        if not allowed <= self._stall_distance_m:  # NaN motion is no evidence of a stall
+            return None
+        loads = [force for counted, force, *_ in self._window if counted]
+        quarter = max(1, len(loads) // 4)
+        static_load = float(np.median(loads[-quarter:]))
+        self.stall = ForceLimitStall(
+            start_s=self._window[0][2],
+            duration_s=self._duration_s,
+            static_load_n=static_load,
+            load_rise_n=static_load - float(np.median(loads[:quarter])),
+            limit_n=self.limit_n,
+            speed_m_s=allowed / self._duration_s,
+            asked_speed_m_s=sum(entry[3] for entry in self._window) / self._duration_s,
+            stiffness_n_per_m=float(stiffness_n_per_m),
+        )
+        return self.stall

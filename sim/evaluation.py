@@ -32,6 +32,7 @@ __all__ = [
     "PolicyError",
     "check_start_inside_workspace",
     "describe_exceedances",
+    "describe_stalls",
     "force_limit_summary",
     "run_episode",
     "summarize",
@@ -93,6 +94,7 @@ class EpisodeResult:
     invalid_actions: int = 0
     force_limit_n: float = float("nan")
     force_limit_exceeded: list[dict[str, Any]] = field(default_factory=list)
+    force_limit_stall: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def force_over_limit_s(self) -> float:
@@ -158,6 +160,7 @@ def run_episode(
         invalid_actions=counts["invalid_action"],
         force_limit_n=float(info["force_limit_n"]),
         force_limit_exceeded=list(info["force_limit_exceeded"]),
+        force_limit_stall=list(info["force_limit_stall"]),
     )
 
 
@@ -204,7 +207,7 @@ def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, A
 
 
 def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """How often, how long and how far the force went past its limit, over episode records.
+    """How often, how long and how far the force went past its limit, and where it held a retraction back.
 
     The records are :meth:`EpisodeResult.to_dict` entries, as evaluate keeps them and sweeps store them
     (a record from before the force was watched counts as none).
@@ -212,12 +215,18 @@ def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]
     limits = [float(r.get("force_limit_n", math.nan)) for r in episodes]
     ratios = [float(r["peak_force_n"]) / limit for r, limit in zip(episodes, limits, strict=True) if limit > 0]
     excursions = [r.get("force_limit_exceeded") or () for r in episodes]
+    stalls = [e for r in episodes for e in r.get("force_limit_stall") or ()]
+    loads = [float(e["static_load_n"]) for e in stalls]
+    load_ratios = [float(e["static_load_n"]) / float(e["limit_n"]) for e in stalls]
     return {
         "force_limit_n": max(limits, default=math.nan),
         "force_limit_exceeded": sum(len(e) for e in excursions),
         "episodes_over_force_limit": sum(bool(e) for e in excursions),
         "force_over_limit_s": float(sum(float(x["duration_s"]) for e in excursions for x in e)),
         "worst_peak_to_limit": max(ratios, default=math.nan),
+        "force_limit_stalls": len(stalls),
+        "stall_static_load_n": float(np.median(loads)) if loads else math.nan,
+        "stall_static_load_to_limit": max(load_ratios, default=math.nan),
     }
 
 
@@ -229,6 +238,17 @@ def describe_exceedances(summary: dict[str, Any]) -> str:
     return (
         f"{count} x in {summary['episodes_over_force_limit']} episode(s), {summary['force_over_limit_s']:.2f} s "
         f"in all, peak {summary['worst_peak_to_limit']:.2f} x the limit"
+    )
+
+
+def describe_stalls(summary: dict[str, Any]) -> str:
+    """``force_limit_stall`` of a summary in words: in how many episodes, and what holding the tissue cost."""
+    count = summary["force_limit_stalls"]
+    if not count:
+        return "never"
+    return (
+        f"in {count} episode(s): holding the tissue cost {summary['stall_static_load_n']:.3f} N (median), "
+        f"up to {summary['stall_static_load_to_limit']:.2f} x the limit"
     )
 
 

@@ -5,7 +5,7 @@ from safety.limits.joint_position import JointPositionLimit
 from safety.limits.joint_velocity import JointVelocityLimit
 from safety.limits.limit import FilterState, Limit, LimitReport
 from safety.limits.rcm_insertion import RcmInsertionLimit
-from safety.limits.retraction_force import RetractionForceLimit
+from safety.limits.retraction_force import RetractionForceLimit, may_hold_tissue
 from safety.limits.workspace_box import WorkspaceBoxLimit
 
 __all__ = [
@@ -18,4 +18,5 @@ __all__ = [
     "RcmInsertionLimit",
     "RetractionForceLimit",
     "WorkspaceBoxLimit",
+    "may_hold_tissue",
 ]

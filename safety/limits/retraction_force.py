@@ -33,13 +33,18 @@ import numpy as np
 
 from safety.limits.limit import FilterState, Limit
 
-__all__ = ["CLOSED_JAW_RAD", "CONTACT_FORCE_N", "FORCE_DIRECTIONS", "RetractionForceLimit"]
+__all__ = ["CLOSED_JAW_RAD", "CONTACT_FORCE_N", "FORCE_DIRECTIONS", "RetractionForceLimit", "may_hold_tissue"]
 
 #: Below this jaw opening the jaws may hold tissue [rad] (the simulation's grasp closes below 0.15 rad; a jaw
 #: stalled on a held flap reads about 0.12 rad).
 CLOSED_JAW_RAD = 0.15
 #: A force this large means contact whatever the jaw does [N] (below the smallest limit presets allow).
 CONTACT_FORCE_N = 0.05
+
+
+def may_hold_tissue(jaw_rad: float, force_n: np.ndarray) -> bool:
+    """The jaws may hold tissue: closed (below :data:`CLOSED_JAW_RAD`) or a contact force measured."""
+    return jaw_rad < CLOSED_JAW_RAD or float(force_n @ force_n) >= CONTACT_FORCE_N**2
 
 
 def _icosahedral_directions() -> np.ndarray:
@@ -128,7 +133,7 @@ class RetractionForceLimit(Limit):
         force = np.asarray(state.retraction_force_n, dtype=float)
         if not np.all(np.isfinite(force)):
             force = np.zeros(3)  # the chain stops on a non-finite force before filtering; never trust one here
-        elif not (state.jaw_rad < CLOSED_JAW_RAD or float(force @ force) >= CONTACT_FORCE_N**2):
+        elif not may_hold_tissue(state.jaw_rad, force):
             self._G[:] = 0.0
             self._h[:] = np.inf
             return self._G, self._h

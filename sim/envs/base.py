@@ -22,7 +22,7 @@ from psm_control.errors import UnknownVariantError
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
-from safety.force_watch import ForceLimitWatch
+from safety.force_watch import FORCE_LIMIT_STALL, ForceLimitWatch
 from sim.backend import SimBackend
 from sim.control import make_controller
 from sim.exposure import exposed_fraction, surface_samples
@@ -186,6 +186,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.controller.config.effective_force_limit_n, self.controller.control_period_s
         )
         self._ticks = 0
+        self._controller_events: list[dict[str, Any]] = []  # the chain's events of this episode (force-limit stalls)
         self._nodes = self.scene.tissue.positions()
         self._exposure_points = surface_samples(self.scene.hidden_centre, HIDDEN_HALF_EXTENTS_M)
         self._eye = cfg.camera.eye(self.scene.tissue_origin)
@@ -229,6 +230,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 stops += 1
                 reasons.append(output.reason)
             interventions.update(output.interventions)
+            self._controller_events.extend(output.events)
             self.backend.servo_jp(output.command)
             count = min(per_tick, physics.substeps - done)
             if self.backend.lagging:  # the arm moves during the substeps, so step them one by one
@@ -453,4 +455,5 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         info["force_peak_n"] = float(events.get("force_peak_n", info["force_norm_n"]))
         info["force_limit_n"] = self._force_watch.limit_n
         info["force_limit_exceeded"] = tuple(e.to_event() for e in self._force_watch.all())
+        info["force_limit_stall"] = tuple(e for e in self._controller_events if e["kind"] == FORCE_LIMIT_STALL)
         return info

@@ -31,7 +31,15 @@ from hardware_if.registered_env import RegisteredTask
 from policies.resolve import resolve_policy
 from psm_control.inputs import check_output_path
 from safety.config import load_safety_config
-from sim.evaluation import EpisodeResult, PolicyError, describe_exceedances, run_episode, summarize, timed
+from sim.evaluation import (
+    EpisodeResult,
+    PolicyError,
+    describe_exceedances,
+    describe_stalls,
+    run_episode,
+    summarize,
+    timed,
+)
 from sim.scene_stream import LiveScene, StreamScene
 from tissue_retract.cli._blind import add_blind_arguments
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, int_in
@@ -148,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
     table.add_row("peak force [N]", f"{summary['peak_force_n']:.3f}{limit}")
     table.add_row("mean peak force [N]", f"{summary['mean_peak_force_n']:.3f}")
     table.add_row("force limit exceeded", describe_exceedances(summary))
+    table.add_row("force limit stalled retraction", describe_stalls(summary))
     for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops", "invalid_actions", "interventions"):
         table.add_row(key, str(summary[key]))
     table.add_row("joint limit violations", str(summary["joint_limit_violations"]))

@@ -21,7 +21,7 @@ from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig, load_safety_config
 from sim.envs import gym_id
-from sim.evaluation import describe_exceedances
+from sim.evaluation import describe_exceedances, describe_stalls
 from sim.robustness import check_relative_ranges, parameter_units, sweep_parameters
 from sim.sweep import EpisodeStore, cap_jobs, file_digest, make_trials, parse_ranges, prepare_output, run_trials
 from sim.sweep.report import summarize, write_report
@@ -202,6 +202,7 @@ def run(args: argparse.Namespace) -> int:
     )
     table.add_row("safety stops / invalid actions", f"{summary['safety_stops']} / {summary['invalid_actions']}")
     table.add_row("force limit exceeded", describe_exceedances(summary))
+    table.add_row("force limit stalled retraction", describe_stalls(summary))
     table.add_row("failure classes", ", ".join(f"{k} {v}" for k, v in summary["failure_classes"].items()))
     if summary["episodes_per_s"]:
         table.add_row("episodes/s (this run)", f"{summary['episodes_per_s']:.2f}")
