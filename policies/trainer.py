@@ -7,6 +7,10 @@ the agent's exploratory actions; each finished episode goes to the HER buffer an
 (success at the final step, as in the paper), logged to TensorBoard and ``eval.csv``, and a resumable
 checkpoint is written atomically. Training episodes are seeded from (seed, episode index), so a run
 resumed from its checkpoint sees the same episodes it would have seen.
+
+With a wall-clock budget (``train --budget-s``) the run stops collecting when the next episode and a last
+evaluation would no longer fit, evaluates, and ``policy.safetensors`` is the best policy of its
+evaluations rather than the last one; the resume checkpoint is always the latest state.
 """
 
 from __future__ import annotations
@@ -69,6 +73,9 @@ class RunSpec:
             perception observes, ``train --blind``); ``None`` trains on the task as it is.
         observation: Names what the policy observes (``task`` without a wrapper); recorded in the
             checkpoints, and a run resumes only with the same.
+        budget_s: Wall-clock budget of the whole run [s] (see the module notes); None: no budget.
+        started_s: When the budget started, on ``time.monotonic()`` (the command's start); None: when
+            :func:`train` is called.
     """
 
     task_id: str
@@ -85,12 +92,16 @@ class RunSpec:
     tensorboard: bool = True
     env_wrapper: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
     observation: str = "task"
+    budget_s: float | None = None
+    started_s: float | None = None
 
     def __post_init__(self) -> None:
         for name, low in (("seed", 0), ("episodes", 1), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigurationError(name, value, f"an integer >= {low}")
+        if self.budget_s is not None and not (isinstance(self.budget_s, int | float) and 1.0 <= self.budget_s < 1e7):
+            raise ConfigurationError("budget_s", self.budget_s, "a number of seconds from 1 to 1e7")
 
 
 @dataclass
@@ -107,6 +118,11 @@ class TrainResult:
     learning_seconds: float = 0.0
     learning_cpu_seconds: float = 0.0
     resumed_from: int = 0
+    demo_seconds: float = 0.0
+    eval_seconds: float = 0.0
+    elapsed_s: float = 0.0
+    policy_episode: int = 0
+    policy_success: float = float("nan")
 
     @property
     def steps_per_second(self) -> float:
@@ -122,6 +138,11 @@ class TrainResult:
     def learning_steps_per_cpu_second(self) -> float:
         """Env steps per second of this process's CPU time once learning: the rate on an idle core."""
         return self.learning_steps / self.learning_cpu_seconds if self.learning_cpu_seconds > 0 else float("nan")
+
+    @property
+    def evaluations(self) -> int:
+        """Evaluations run."""
+        return len(self.success_rates)
 
     @property
     def final_success(self) -> float:
@@ -169,6 +190,40 @@ def _demonstrations(spec: RunSpec, env: gym.Env[Any, Any], dims: Dims) -> list[E
     return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=_DEMO_SEED + 1000 * spec.seed)
 
 
+#: Kept free at the end of a budget [s]: closing the environments and the interpreter's exit with torch,
+#: Numba and PyBullet loaded took 0.8-1.2 s on the 2-core machine of the README's figures.
+_FINISH_RESERVE_S = 1.5
+
+
+class _Budget:
+    """The run's wall-clock budget: whether one more training episode and a last evaluation still fit.
+
+    Every estimate is the last measured one: a training episode's wall time (collection and updates), an
+    evaluation's with its checkpoint; before the first evaluation, its episodes at the collection's
+    wall time per step, doubled (the actor's forward passes and the checkpoint come on top). The
+    process's exit (:data:`_FINISH_RESERVE_S`) is kept free too.
+    """
+
+    def __init__(self, budget_s: float | None, started_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+        self.budget_s = budget_s
+        self.started_s = started_s
+        self._clock = clock
+        self.episode_s = 0.0
+        self.step_s = 0.0
+        self.evaluation_s: float | None = None
+
+    def elapsed(self) -> float:
+        """Seconds since the budget started."""
+        return self._clock() - self.started_s
+
+    def fits_episode(self, eval_episodes: int, horizon: int) -> bool:
+        """One more episode and the last evaluation end within the budget (always, without a budget)."""
+        if self.budget_s is None:
+            return True
+        evaluation = self.evaluation_s if self.evaluation_s is not None else 2.0 * eval_episodes * horizon * self.step_s
+        return self.elapsed() + self.episode_s + evaluation + _FINISH_RESERVE_S <= self.budget_s
+
+
 class _Logger:
     """TensorBoard scalars and the evaluation CSV."""
 
@@ -206,19 +261,22 @@ def train(spec: RunSpec, config: TrainConfig) -> TrainResult:
     Sets this process's torch to one thread: for networks this small that is fastest, and it keeps
     parallel runs (``policies.reproduce``) from oversubscribing the cores.
     """
+    started = spec.started_s if spec.started_s is not None else time.monotonic()
     torch.set_num_threads(1)
     ensure_registered(spec.task_id)
     env, eval_env = gym.make(spec.task_id), gym.make(spec.task_id)
     if spec.env_wrapper is not None:
         env, eval_env = spec.env_wrapper(env), spec.env_wrapper(eval_env)
     try:
-        return _train(spec, config, env, eval_env)
+        return _train(spec, config, env, eval_env, _Budget(spec.budget_s, started))
     finally:
         env.close()
         eval_env.close()
 
 
-def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env: gym.Env[Any, Any]) -> TrainResult:
+def _train(
+    spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env: gym.Env[Any, Any], budget: _Budget
+) -> TrainResult:
     spaces = env_spaces(env)
     dims = Dims(
         int(np.prod(spaces["observation"])),
@@ -232,6 +290,7 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
     resume_path, policy_path = out / RESUME_FILE, out / POLICY_FILE
 
     buffer = EpisodeBuffer(config.buffer_size, horizon, dims.obs, dims.goal, dims.action)
+    demo_start = time.monotonic()
     demos = _demonstrations(spec, env, dims) if config.uses_demos else []
     demo_buffer = None
     if demos:
@@ -250,12 +309,13 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
             agent.pretrain(demo_buffer, reward_fn, config.pretrain_steps)
 
     result = TrainResult(policy_path, resume_path, resumed_from=start_episode)
+    result.demo_seconds = time.monotonic() - demo_start
     logger = _Logger(out, spec.tensorboard)
     bar = None
     if spec.progress:
         bar = tqdm(total=spec.episodes, initial=start_episode, desc=f"{config.algo} {spec.task_id}", unit="ep")
 
-    def checkpoint(episode: int) -> None:
+    def checkpoint(episode: int, policy: bool = True) -> None:
         progress = {"episodes": episode, "env_steps": env_steps, "updates": agent.updates}
         common: dict[str, Any] = {
             "task_id": spec.task_id,
@@ -267,11 +327,32 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
             resume_path, agent, progress=progress, training=True, arrays=_prefixed("replay", buffer.state()),
             rng={"agent": agent.rng.bit_generator.state, "seed": spec.seed}, **common,
         )  # fmt: skip
-        save_checkpoint(policy_path, agent, progress=progress, **common)
+        if policy:
+            save_checkpoint(policy_path, agent, progress=progress, **common)
 
     metrics: dict[str, float] = {}
+
+    def evaluation(episode: int) -> None:
+        """Score the actor, log it, checkpoint; under a budget the policy file keeps the best evaluation."""
+        start = time.monotonic()
+        success = evaluate(agent, eval_env, spec.eval_episodes)
+        result.success_rates.append((episode, success))
+        logger.evaluation(episode, env_steps, agent.updates, success, result.steps_per_second)
+        logger.scalars({f"train/{k}": v for k, v in metrics.items()}, env_steps)
+        best = budget.budget_s is None or not success < result.policy_success  # the first one: NaN
+        checkpoint(episode, policy=best)
+        if best:
+            result.policy_episode, result.policy_success = episode, success
+        budget.evaluation_s = time.monotonic() - start
+        result.eval_seconds += budget.evaluation_s
+        if bar is not None:
+            bar.set_postfix(success=f"{success:.2f}", steps_s=f"{result.steps_per_second:.0f}")
+
+    done = start_episode
     try:
         for episode_index in range(start_episode, spec.episodes):
+            if not budget.fits_episode(spec.eval_episodes, horizon):
+                break
             t0, c0 = time.perf_counter(), time.process_time()
             obs, _ = env.reset(seed=spec.seed * 1_000_003 + episode_index)
             o, ag, g, a, term = [obs["observation"]], [obs["achieved_goal"]], [], [], []
@@ -308,23 +389,21 @@ def _train(spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env:
             result.train_seconds += t2 - t0
             result.update_seconds += t2 - t1
             result.env_steps += len(episode.action)
+            budget.episode_s, budget.step_s = t2 - t0, (t1 - t0) / len(episode.action)
             done = episode_index + 1
             if bar is not None:
                 bar.update(1)
             if done % spec.eval_every == 0 or done == spec.episodes:
-                success = evaluate(agent, eval_env, spec.eval_episodes)
-                result.success_rates.append((done, success))
-                logger.evaluation(done, env_steps, agent.updates, success, result.steps_per_second)
-                logger.scalars({f"train/{k}": v for k, v in metrics.items()}, env_steps)
-                checkpoint(done)
-                if bar is not None:
-                    bar.set_postfix(success=f"{success:.2f}", steps_s=f"{result.steps_per_second:.0f}")
+                evaluation(done)
         if start_episode >= spec.episodes:
             checkpoint(start_episode)
+        elif budget.budget_s is not None and (not result.success_rates or result.success_rates[-1][0] != done):
+            evaluation(done)  # the budget ended the run between two evaluations
     finally:
         if bar is not None:
             bar.close()
         logger.close()
+    result.elapsed_s = budget.elapsed()
     return result
 
 

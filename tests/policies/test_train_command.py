@@ -14,7 +14,7 @@ import pytest
 from policies.checkpoint import load_checkpoint, load_policy
 from policies.config import ALGORITHMS, TrainConfig
 from policies.toy_env import TOY_TASK_ID
-from policies.trainer import RunSpec, train
+from policies.trainer import _FINISH_RESERVE_S, RunSpec, _Budget, train
 from tissue_retract.cli import main
 
 
@@ -170,3 +170,45 @@ def test_a_run_resumes_only_on_what_it_observed(tmp_path: Path, capsys: pytest.C
         assert main([*args, "--episodes", "2", "--blind"]) == 1
     err = capsys.readouterr().err
     assert "different observation" in err and "--fresh" in err
+
+
+def test_a_budget_ends_with_the_best_evaluated_policy(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--budget-s stops long before --episodes, evaluates the last state, and keeps the best evaluation."""
+    args = ["train", "--task", TOY_TASK_ID, "--algo", "ddpgbc", "--demos", "2", "--episodes", "100000"]
+    args += ["--budget-s", "6", "--eval-every", "3", "--eval-episodes", "3", "--out", str(tmp_path)]
+    args += ["--no-progress", "--no-tensorboard"]
+    for item in TINY:
+        args += ["--set", item]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "budget 6 s:" in out and "best evaluated policy: episode" in out
+    rows = [(int(r["episode"]), float(r["success_rate"])) for r in csv.DictReader((tmp_path / "eval.csv").open())]
+    last_episode = rows[-1][0]
+    assert last_episode < 100_000
+    best_episode = max(rows, key=lambda row: (row[1], row[0]))[0]  # the best; of equals, the latest
+    assert load_checkpoint(tmp_path / "policy.safetensors").meta["progress"]["episodes"] == best_episode
+    assert load_checkpoint(tmp_path / "resume.safetensors").meta["progress"]["episodes"] == last_episode
+    assert f"episode {best_episode}," in out
+
+
+def test_the_budget_keeps_room_for_the_next_episode_the_last_evaluation_and_the_exit() -> None:
+    """Each estimate is the last measured one; before any evaluation, its episodes at twice the step time."""
+    now = [0.0]
+    budget = _Budget(10.0, started_s=0.0, clock=lambda: now[0])
+    budget.episode_s, budget.step_s = 0.5, 0.01  # an evaluation of 3 x 50 steps: estimated 3 s
+    now[0] = 10.0 - 0.5 - 3.0 - _FINISH_RESERVE_S  # the latest time the next episode still fits
+    assert budget.fits_episode(3, 50)
+    now[0] += 0.01
+    assert not budget.fits_episode(3, 50)
+    budget.evaluation_s = 1.0  # measured: replaces the estimate
+    assert budget.fits_episode(3, 50)
+    assert _Budget(None, started_s=0.0, clock=lambda: 1e9).fits_episode(3, 50)
+
+
+def test_a_budget_outside_its_range_is_refused_with_what_is_allowed(capsys: pytest.CaptureFixture[str]) -> None:
+    """--budget-s 0 is a usage error naming the range, not a traceback."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "--task", TOY_TASK_ID, "--budget-s", "0"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "--budget-s" in err and "Traceback" not in err

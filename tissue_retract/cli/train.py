@@ -17,8 +17,10 @@ import argparse
 import dataclasses
 import functools
 import json
+import os
 import shlex
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -30,7 +32,7 @@ from policies.config import TrainConfig
 from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
 from psm_control.errors import ConfigurationError
 from tissue_retract.cli._blind import add_blind_arguments
-from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, int_in
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, float_in, int_in
 
 __all__ = ["add_arguments", "parse_overrides", "run"]
 
@@ -71,6 +73,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         blind_help="observe a registered site and a jaw-sensed grasp, rewarded by the true distance",
         default_mm=3.0,
         error_help="the largest registration error drawn per episode",
+    )
+    parser.add_argument(
+        "--budget-s",
+        type=float_in(1.0, 1e7),
+        default=None,
+        help="wall-clock budget of the whole command [s]: stop in time for a last evaluation and keep the "
+        "best evaluated policy as policy.safetensors (default: none; train all --episodes)",
     )
     parser.add_argument("--fresh", action="store_true", help="ignore an existing checkpoint in --out and start over")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -121,12 +130,25 @@ def run(args: argparse.Namespace) -> int:
         tensorboard=not args.no_tensorboard,
         env_wrapper=_blind(args.registration_error_mm) if args.blind else None,
         observation=f"blind, registration error up to {args.registration_error_mm:g} mm" if args.blind else "task",
+        budget_s=args.budget_s,
+        started_s=_command_started_s() if sys.argv[1:2] == ["train"] else None,  # else: called in-process
     )
     result = train(spec, config)
     if result.resumed_from:
         print(f"resumed from episode {result.resumed_from}")
     for episode, success in result.success_rates:
         print(f"episode {episode:6d}: success {100 * success:5.1f} %")
+    if args.budget_s is not None:
+        over = result.elapsed_s - args.budget_s
+        print(
+            f"budget {args.budget_s:g} s: {result.elapsed_s:.1f} s used (demonstrations {result.demo_seconds:.1f} s, "
+            f"training {result.train_seconds:.1f} s, {result.evaluations} evaluation(s) {result.eval_seconds:.1f} s)"
+            + (f"; OVER by {over:.1f} s" if over > 0 else "")
+        )
+        print(
+            f"best evaluated policy: episode {result.policy_episode}, success {100 * result.policy_success:.1f} % "
+            f"on {args.eval_episodes} held-out episodes"
+        )
     print(f"policy: {result.policy_path}")
     print(f"resume checkpoint: {result.resume_path}")
     if result.env_steps:
@@ -158,4 +180,20 @@ def _rebuild(args: argparse.Namespace) -> str:
         parts += ["--set", item]
     if args.blind:
         parts += ["--blind", "--registration-error-mm", f"{args.registration_error_mm:g}"]
+    if args.budget_s is not None:
+        parts += ["--budget-s", f"{args.budget_s:g}"]
     return shlex.join(parts)
+
+
+def _command_started_s() -> float:
+    """When this process started, on the ``time.monotonic()`` clock (Linux's ``/proc``); elsewhere: now.
+
+    ``--budget-s`` covers the whole command, the interpreter's start and the imports included.
+    """
+    try:
+        after_name = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+        started_ticks = int(after_name[19])  # field 22 of proc(5), the start time after boot [clock ticks]
+        age_s = time.clock_gettime(time.CLOCK_BOOTTIME) - started_ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return time.monotonic()
+    return time.monotonic() - max(age_s, 0.0)
