@@ -340,12 +340,21 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _held_force(self, nodes: np.ndarray) -> np.ndarray:
         """The force the tissue exerts on the jaws now (zero when they hold nothing) [N]."""
+        return grasp_force(**self._mechanics(nodes))
+
+    def _mechanics(self, nodes: np.ndarray) -> dict[str, Any]:
+        """What the tissue's force and strain are computed from: these node positions, the flap, the grasp now."""
         assert self.scene is not None
         t = self.scene.tissue
-        return grasp_force(
-            nodes, t.edges, t.rest_lengths, t.params.spring_stiffness_n_per_m,
-            self.scene.grasp.nodes, t.node_mass_kg, self.scene.gravity_m_s2,
-        )  # fmt: skip
+        return {
+            "positions": nodes,
+            "edges": t.edges,
+            "rest_lengths": t.rest_lengths,
+            "stiffness_n_per_m": t.params.spring_stiffness_n_per_m,
+            "grasped": self.scene.grasp.nodes,
+            "node_mass_kg": t.node_mass_kg,
+            "gravity_m_s2": self.scene.gravity_m_s2,
+        }
 
     def _watch_tick(self) -> float:
         """Give the force of the tick just simulated to the force-limit watch; return its magnitude [N]."""
@@ -367,19 +376,11 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _update_tissue(self, events: dict[str, Any]) -> None:
         assert self.scene is not None
-        s, cfg = self.scene, self.config
-        t = s.tissue
-
-        def signals():
-            return measure(
-                self._nodes, t.edges, t.rest_lengths, t.params.spring_stiffness_n_per_m,
-                s.grasp.nodes, t.node_mass_kg, s.gravity_m_s2, cfg.damage,
-            )  # fmt: skip
-
-        now = signals()
+        s, damage = self.scene, self.config.damage
+        now = measure(**self._mechanics(self._nodes), limits=damage)
         grasp = s.grasp.update(self.backend.jaw, s.grasp_position(), self._nodes, float(np.linalg.norm(now.force_n)))
-        if grasp.grasped or grasp.lost:
-            now = signals()
+        if grasp.grasped or grasp.lost:  # the jaws now hold other nodes
+            now = measure(**self._mechanics(self._nodes), limits=damage)
         self._force, self._strain = now.force_n, now.max_strain
         events.update(
             grip_loss=grasp.lost, improper_grasp=grasp.improper, tissue_damage=now.damaged, new_grasp=grasp.grasped
