@@ -24,6 +24,9 @@ from std_msgs.msg import String  # type: ignore[import-untyped]
 
 from hardware_if.motion import JointTrajectory
 from psm_control.robot import PsmModel
+from tests.ros.rclpy_rate_race import close_the_race
+
+close_the_race()
 
 failures: list[str] = []
 SPEC = PsmModel.from_variant().spec

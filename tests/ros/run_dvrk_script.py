@@ -15,6 +15,10 @@ from typing import Any
 
 import crtk  # type: ignore[import-not-found]
 
+from tests.ros.rclpy_rate_race import close_the_race
+
+close_the_race()
+
 waits: list[tuple[bool, float]] = []
 _original_wait = crtk.wait_move_handle.wait
 
