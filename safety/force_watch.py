@@ -141,7 +141,7 @@ class ForceLimitWatch:
 
 
 #: A retraction the limit slows below this is stalled [m/s]: measured on the tasks (expert, 1 s windows
-#: after the grasp) the grasp point moved at 11-17 mm/s under limits of 0.05 and 0.1 N, where the
+#: after the grasp) the grasp point moved at 11-18 mm/s under limits of 0.05 and 0.1 N, where the
 #: retraction never finished, and at 34-39 mm/s under the nerve preset's 0.4 N, where it did.
 STALL_SPEED_M_S = 0.025
 
