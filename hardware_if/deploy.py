@@ -358,7 +358,10 @@ def deploy(options: DeployOptions, *, echo: Any = print) -> DeployReport:
 
 
 def _hold(report: DeployReport, recorder: Recorder, fault: HoldError) -> None:
-    """Record a hold: the reason in the report (exit 4) and the event with its data in the recording."""
+    """Record a hold (once): the reason in the report (exit 4) and the event with its data in the recording."""
+    if fault.recorded:
+        return
+    fault.recorded = True
     report.fault = str(fault)
     report.holds += 1
     recorder.write("/deploy/event", {"kind": "hold", "text": str(fault), "fault": fault.kind, "data": fault.data})
@@ -558,6 +561,10 @@ def _deploy_dvrk(
                     f"episode {episode}: success={entry['success']} steps {entry['steps']} "
                     f"peak force {entry['peak_force_n']:.3f} N"
                 )
+        except HoldError as e:
+            # On disk before the ROS teardown below: a native crash in it must not lose the hold.
+            _hold(report, recorder, e)
+            raise
         finally:
             listener.close()
             client.close()

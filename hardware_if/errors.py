@@ -40,10 +40,12 @@ class HoldError(TissueRetractError):
             ``"not ready"``, ``"invalid data"``, ``"fault"``.
         detail: What was wrong and what is allowed.
         data: The offending values (JSON-ready), recorded with the hold.
+        recorded: The hold is in the recording already (it is recorded once).
     """
 
     def __init__(self, kind: str, detail: str, data: dict[str, object] | None = None) -> None:
         self.kind = kind
         self.detail = detail
         self.data = dict(data or {})
+        self.recorded = False
         super().__init__(f"{kind}: {detail}")
