@@ -28,6 +28,7 @@ from hardware_if import convert
 from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
+from hardware_if.session import stop_spin_thread
 from hardware_if.task_estimate import JawReading
 from psm_control.commands import JointCommand, MeasuredState
 from psm_control.errors import TissueRetractError
@@ -151,9 +152,9 @@ class PsmClient(Node):
     def close(self) -> None:
         """Stop spinning and destroy the node (safe to call twice)."""
         self._running = False
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        if not stop_spin_thread(self._thread, self.get_logger()):
+            return
+        self._thread = None
         if self._executor is not None:
             self._executor.shutdown(timeout_sec=1.0)
             self._executor = None

@@ -33,6 +33,7 @@ from hardware_if.crtk import periodic_qos
 from hardware_if.errors import DvrkTimeoutError
 from hardware_if.psm_client import PsmClient
 from hardware_if.registration import console_base_frame, grasp_point
+from hardware_if.session import stop_spin_thread
 from hardware_if.sim_task import task_topic
 from hardware_if.task_estimate import TaskEstimate
 
@@ -169,7 +170,8 @@ class TaskListener(Node):
     def close(self) -> None:
         """Stop spinning and destroy the node."""
         self._running = False
-        self._thread.join(timeout=2.0)
+        if not stop_spin_thread(self._thread, self.get_logger()):
+            return
         self._executor.shutdown(timeout_sec=1.0)
         self.destroy_node()
 

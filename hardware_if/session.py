@@ -6,13 +6,17 @@ so that every executable has the same ``with`` shape, and turns a missing ROS in
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
 from hardware_if.errors import RosNotAvailableError
 
-__all__ = ["require_ros", "ros_session"]
+__all__ = ["SPIN_JOIN_TIMEOUT_S", "require_ros", "ros_session", "stop_spin_thread"]
+
+#: How long closing a node waits for its spin thread to leave ``spin_once`` (which waits 0.05 s at most).
+SPIN_JOIN_TIMEOUT_S = 5.0
 
 
 def require_ros() -> Any:
@@ -49,3 +53,19 @@ def ros_session(args: list[str] | None = None, *, signal_handlers: bool = True) 
     finally:
         if rclpy.ok():
             rclpy.shutdown()
+
+
+def stop_spin_thread(thread: threading.Thread | None, logger: Any) -> bool:
+    """Wait for a node's spin thread to end (its loop flag already cleared); False while it still runs.
+
+    rclpy does not support destroying a node, or shutting down its executor, while another thread is inside
+    ``spin_once`` on it: the spinning thread can crash the process (SIGSEGV, ros2/rclpy#663). A caller that
+    gets False leaves the node alone; the thread is a daemon and ends with the process.
+    """
+    if thread is None:
+        return True
+    thread.join(timeout=SPIN_JOIN_TIMEOUT_S)
+    if thread.is_alive():
+        logger.warning(f"{thread.name}: still spinning after {SPIN_JOIN_TIMEOUT_S:.0f} s; node left to the exit")
+        return False
+    return True
