@@ -11,6 +11,7 @@ Pinocchio start-up for nothing, and ``--help`` would need every optional extra.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import faulthandler
 import importlib
 import shlex
@@ -95,8 +96,10 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``tissue-retract``."""
-    # A crash in native code (ROS, DDS, physics) then prints every thread's Python stack before the exit.
-    faulthandler.enable()
+    # A crash in native code (ROS, DDS, physics) then prints every thread's Python stack before the exit;
+    # called in-process with a stderr that has no file descriptor (captured output), there is nowhere to.
+    with contextlib.suppress(OSError, ValueError):
+        faulthandler.enable()
     arguments = sys.argv[1:] if argv is None else argv
     parser = build_parser(arguments)
     args = parser.parse_args(arguments)
