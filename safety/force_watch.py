@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -69,16 +69,7 @@ class ForceExcursion:
 
     def to_event(self) -> dict[str, Any]:
         """The ``force_limit_exceeded`` event, JSON-ready."""
-        return {
-            "kind": FORCE_LIMIT_EXCEEDED,
-            "start_s": self.start_s,
-            "duration_s": self.duration_s,
-            "peak_n": self.peak_n,
-            "limit_n": self.limit_n,
-            "excess_n": self.excess_n,
-            "ratio": self.ratio,
-            "open": self.open,
-        }
+        return {"kind": FORCE_LIMIT_EXCEEDED, **asdict(self), "excess_n": self.excess_n, "ratio": self.ratio}
 
 
 class ForceLimitWatch:
@@ -173,18 +164,7 @@ class ForceLimitStall:
 
     def to_event(self) -> dict[str, Any]:
         """The ``force_limit_stall`` event, JSON-ready, with the warning for the user as ``text``."""
-        return {
-            "kind": FORCE_LIMIT_STALL,
-            "start_s": self.start_s,
-            "duration_s": self.duration_s,
-            "static_load_n": self.static_load_n,
-            "load_rise_n": self.load_rise_n,
-            "limit_n": self.limit_n,
-            "speed_m_s": self.speed_m_s,
-            "asked_speed_m_s": self.asked_speed_m_s,
-            "stiffness_n_per_m": self.stiffness_n_per_m,
-            "text": self.warning(),
-        }
+        return {"kind": FORCE_LIMIT_STALL, **asdict(self), "text": self.warning()}
 
     def warning(self) -> str:
         """The warning for the user: what happened, what it means, what to change."""
