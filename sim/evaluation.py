@@ -2,7 +2,8 @@
 
 The failure classes replace the paper's by-hand classification: an unsuccessful episode is labelled by
 the most serious event it saw (``sim_unstable`` > ``safety_stop`` > ``invalid_action`` > ``tissue_damage``
-> ``grip_loss`` > ``improper_grasp``), and ``timeout`` when none occurred. Success is scored at the final step, as in
+> ``grip_loss`` > ``improper_grasp``), then ``force_limit_stall`` when the force limit held a retraction back
+(the chain's stall warning), and ``timeout`` when none occurred. Success is scored at the final step, as in
 the paper's evaluation.
 
 The safety figures come from what the joints really did, step by step: ``joint_limit_violations``
@@ -33,17 +34,32 @@ __all__ = [
     "check_start_inside_workspace",
     "describe_exceedances",
     "describe_stalls",
+    "failure_class",
     "force_limit_summary",
     "run_episode",
     "summarize",
 ]
 
 FAILURE_CLASSES = (
-    "none", "improper_grasp", "grip_loss", "tissue_damage", "safety_stop", "invalid_action", "timeout", "sim_unstable",
+    "none", "improper_grasp", "grip_loss", "tissue_damage", "safety_stop", "invalid_action", "force_limit_stall",
+    "timeout", "sim_unstable",
 )  # fmt: skip
 _SEVERITY = ("sim_unstable", "safety_stop", "invalid_action", "tissue_damage", "grip_loss", "improper_grasp")
 
 Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
+
+
+def failure_class(success: bool, event_steps: Mapping[str, int], *, stalled: bool) -> str:
+    """An episode's failure class (one of :data:`FAILURE_CLASSES`; see the module's description).
+
+    Args:
+        success: The episode succeeded.
+        event_steps: Steps on which each event of the severity order occurred (missing: none).
+        stalled: The chain warned that the force limit stalled the retraction.
+    """
+    if success:
+        return "none"
+    return next((e for e in _SEVERITY if event_steps.get(e, 0)), "force_limit_stall" if stalled else "timeout")
 
 
 class PolicyError(TissueRetractError):
@@ -140,7 +156,7 @@ def run_episode(
         if terminated or truncated:
             break
     success = bool(info["is_success"]) and not counts["sim_unstable"]
-    failure = "none" if success else next((e for e in _SEVERITY if counts[e]), "timeout")
+    failure = failure_class(success, counts, stalled=bool(info["force_limit_stall"]))
     return EpisodeResult(
         seed=seed,
         success=success,
