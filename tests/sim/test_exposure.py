@@ -53,3 +53,42 @@ def test_ray_exposure_matches_segmentation() -> None:
         assert min(fractions) < 0.3 < max(fractions)  # both covered and exposed states were checked
     finally:
         env.close()
+
+
+def _every_pair(points: np.ndarray, eye: np.ndarray, nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Reference: the same segment-triangle test on every (point, triangle) pair at once, in NumPy."""
+    a = nodes[triangles[:, 0]]
+    e1, e2 = nodes[triangles[:, 1]] - a, nodes[triangles[:, 2]] - a
+    d = (eye - points)[:, None, :]  # (P, 1, 3)
+    s = points[:, None, :] - a[None]  # (P, T, 3)
+    pv, qv = np.cross(d, e2[None]), np.cross(s, e1[None])
+    det = np.sum(e1[None] * pv, axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = np.where(np.abs(det) < 1e-12, np.nan, 1.0 / det)
+        u = np.sum(s * pv, axis=2) * inverse
+        v = np.sum(d * qv, axis=2) * inverse
+        t = np.sum(e2[None] * qv, axis=2) * inverse
+        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-6) & (t < 1)
+    return ~hit.any(axis=1)
+
+
+def test_the_compiled_test_agrees_with_every_pair_tested_at_once() -> None:
+    """Flaps crumpled at random over the samples, with NaN nodes too: the same points are exposed."""
+    rng = np.random.default_rng(5)
+    env = make_env("expose")
+    try:
+        env.reset(seed=0)
+        u = env.unwrapped
+        points, eye, triangles = u._exposure_points, u._eye, np.asarray(u.scene.tissue.triangles)
+        spread = np.ptp(points, axis=0) + 0.01
+        checked = 0
+        for trial in range(200):
+            nodes = u._nodes + rng.normal(0.0, 1.0, u._nodes.shape) * spread * (trial % 4) / 4
+            if trial % 10 == 9:
+                nodes[rng.integers(len(nodes))] = np.nan
+            expected = _every_pair(points, eye, nodes, triangles)
+            np.testing.assert_array_equal(exposed_mask(points, eye, nodes, triangles), expected)
+            checked += int(expected.sum()) * int((~expected).sum()) > 0  # both kinds of point present
+        assert checked > 50
+    finally:
+        env.close()
