@@ -50,13 +50,14 @@ class PsmBody:
             self.link_index[info[12].decode()] = index
         self.arm_joints = [self.joint_index[name] for name in model.spec.joint_names]
         self.jaw_joints = [self.joint_index[name] for name in JAW_JOINTS]
+        self._joints = self.arm_joints + self.jaw_joints
 
     def reset_joints(self, q: np.ndarray, jaw: float = 0.0) -> None:
-        """Teleport the arm and jaw to a configuration (no dynamics)."""
-        for index, value in zip(self.arm_joints, q, strict=True):
-            p.resetJointState(self.body_id, index, float(value), physicsClientId=self.client)
-        for index in self.jaw_joints:
-            p.resetJointState(self.body_id, index, float(jaw) / 2.0, physicsClientId=self.client)
+        """Teleport the arm and jaw to a configuration at rest (no dynamics), in one call to the engine."""
+        if len(q) != len(self.arm_joints):
+            raise ValueError(f"reset_joints: {len(self.arm_joints)} joint values expected, got {len(q)}")
+        values = [[float(v)] for v in q] + [[float(jaw) / 2.0]] * len(self.jaw_joints)
+        p.resetJointStatesMultiDof(self.body_id, self._joints, targetValues=values, physicsClientId=self.client)
 
     def link_pose(self, link: str) -> np.ndarray:
         """4x4 world pose of a URDF link's frame."""
