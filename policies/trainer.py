@@ -8,6 +8,10 @@ the agent's exploratory actions; each finished episode goes to the HER buffer an
 checkpoint is written atomically. Training episodes are seeded from (seed, episode index), so a run
 resumed from its checkpoint sees the same episodes it would have seen.
 
+With ``RunSpec.overlap`` the episodes run in a worker process and the same number of updates per episode
+is spread over its steps, each running while the worker simulates (:mod:`policies.collect`): both cores
+work. Without it (the paper's algorithms as ``reproduce`` runs them) collection and learning alternate.
+
 With a wall-clock budget (``train --budget-s``) the run stops collecting when the next episode and a last
 evaluation would no longer fit, evaluates, and ``policy.safetensors`` is the best policy of its
 evaluations rather than the last one; the resume checkpoint is always the latest state.
@@ -18,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import importlib
+import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -39,6 +44,7 @@ from policies.checkpoint import (
     load_checkpoint,
     save_checkpoint,
 )
+from policies.collect import Collector, OverlappedCollector, SerialCollector, can_run_in_worker
 from policies.config import TrainConfig
 from policies.demos import collect_demos, expert_for, load_demos, rollout
 from policies.errors import CheckpointError, TrainingDivergedError
@@ -76,6 +82,8 @@ class RunSpec:
         budget_s: Wall-clock budget of the whole run [s] (see the module notes); None: no budget.
         started_s: When the budget started, on ``time.monotonic()`` (the command's start); None: when
             :func:`train` is called.
+        overlap: Collect in a worker process, the updates running while the task simulates
+            (:mod:`policies.collect`); False collects and then learns, in this process, as the paper's code.
     """
 
     task_id: str
@@ -94,6 +102,7 @@ class RunSpec:
     observation: str = "task"
     budget_s: float | None = None
     started_s: float | None = None
+    overlap: bool = False
 
     def __post_init__(self) -> None:
         for name, low in (("seed", 0), ("episodes", 1), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
@@ -263,19 +272,28 @@ def train(spec: RunSpec, config: TrainConfig) -> TrainResult:
     """
     started = spec.started_s if spec.started_s is not None else time.monotonic()
     torch.set_num_threads(1)
-    ensure_registered(spec.task_id)
-    env, eval_env = gym.make(spec.task_id), gym.make(spec.task_id)
+    task_id = ensure_registered(spec.task_id)
+    if spec.overlap and not can_run_in_worker(spec.env_wrapper):
+        raise ConfigurationError("env_wrapper", spec.env_wrapper, "a picklable wrapper to collect in a worker")
+    env, eval_env = gym.make(task_id), gym.make(task_id)
     if spec.env_wrapper is not None:
         env, eval_env = spec.env_wrapper(env), spec.env_wrapper(eval_env)
+    collector = OverlappedCollector(task_id, spec.env_wrapper) if spec.overlap else SerialCollector(env)
     try:
-        return _train(spec, config, env, eval_env, _Budget(spec.budget_s, started))
+        return _train(spec, config, env, eval_env, collector, _Budget(spec.budget_s, started))
     finally:
+        collector.close()
         env.close()
         eval_env.close()
 
 
 def _train(
-    spec: RunSpec, config: TrainConfig, env: gym.Env[Any, Any], eval_env: gym.Env[Any, Any], budget: _Budget
+    spec: RunSpec,
+    config: TrainConfig,
+    env: gym.Env[Any, Any],
+    eval_env: gym.Env[Any, Any],
+    collector: Collector,
+    budget: _Budget,
 ) -> TrainResult:
     spaces = env_spaces(env)
     dims = Dims(
@@ -348,38 +366,47 @@ def _train(
         if bar is not None:
             bar.set_postfix(success=f"{success:.2f}", steps_s=f"{result.steps_per_second:.0f}")
 
+    def act_from(first_step: int) -> Callable[[dict[str, np.ndarray]], np.ndarray]:
+        """The episode's actions: uniformly random for the first ``random_steps`` of the run, then explored."""
+        steps = itertools.count(first_step)
+
+        def act(obs: dict[str, np.ndarray]) -> np.ndarray:
+            if next(steps) < config.random_steps:
+                return agent.rng.uniform(-1.0, 1.0, dims.action).astype(np.float32)
+            return agent.explore(obs["observation"], obs["desired_goal"])
+
+        return act
+
+    def learn_from(first_step: int) -> Callable[[int], None]:
+        """Updates while the episode simulates (overlapped collection): ``updates_per_episode`` spread over
+        its steps, from the buffer as it was when the episode started. Serial collection learns after."""
+
+        def learn(step: int) -> None:
+            nonlocal metrics
+            if not spec.overlap or step < 0 or first_step + step < config.random_steps:
+                return
+            count = (step + 1) * config.updates_per_episode // horizon - step * config.updates_per_episode // horizon
+            if count > 0:
+                metrics = agent.train(buffer, demo_buffer, reward_fn, count) or metrics
+
+        return learn
+
     done = start_episode
     try:
         for episode_index in range(start_episode, spec.episodes):
             if not budget.fits_episode(spec.eval_episodes, horizon):
                 break
             t0, c0 = time.perf_counter(), time.process_time()
-            obs, _ = env.reset(seed=spec.seed * 1_000_003 + episode_index)
-            o, ag, g, a, term = [obs["observation"]], [obs["achieved_goal"]], [], [], []
-            while True:
-                if env_steps < config.random_steps:
-                    action = agent.rng.uniform(-1.0, 1.0, dims.action).astype(np.float32)
-                else:
-                    action = agent.explore(obs["observation"], obs["desired_goal"])
-                g.append(obs["desired_goal"])
-                obs, _, terminated, truncated, _ = env.step(action)
-                env_steps += 1
-                o.append(obs["observation"])
-                ag.append(obs["achieved_goal"])
-                a.append(action)
-                term.append(terminated)
-                if terminated or truncated:
-                    break
-            episode = Episode(
-                np.asarray(o, np.float32), np.asarray(ag, np.float32), np.asarray(g, np.float32),
-                np.asarray(a, np.float32), np.asarray(term, bool),
-            )  # fmt: skip
+            seed = spec.seed * 1_000_003 + episode_index
+            episode = collector.episode(seed, act_from(env_steps), learn_from(env_steps))
+            env_steps += len(episode.action)
             buffer.add(episode)
             agent.observe_episode(episode.obs, episode.achieved_goal, episode.desired_goal)
             t1 = time.perf_counter()
             learning = env_steps >= config.random_steps
-            if learning:
+            if learning and not spec.overlap:
                 metrics = agent.train(buffer, demo_buffer, reward_fn, config.updates_per_episode)
+            if learning:
                 _check_finite(agent, metrics, episode_index + 1, policy_path)
             t2 = time.perf_counter()
             if learning:

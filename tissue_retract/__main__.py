@@ -2,4 +2,5 @@
 
 from tissue_retract.cli import main
 
-raise SystemExit(main())
+if __name__ == "__main__":  # a spawned worker process imports this module under another name
+    raise SystemExit(main())

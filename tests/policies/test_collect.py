@@ -1,0 +1,58 @@
+"""Episodes collected in a worker process are the episodes collected here, and learning runs during them."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from policies.collect import OverlappedCollector, SerialCollector, can_run_in_worker
+from policies.config import TrainConfig
+from policies.toy_env import TOY_TASK_ID
+from policies.trainer import RunSpec, ensure_registered, train
+from psm_control.errors import ConfigurationError
+
+
+def _actions(seed: int, size: int) -> Callable[[dict[str, np.ndarray]], np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return lambda obs: rng.uniform(-1.0, 1.0, size).astype(np.float32)
+
+
+def test_the_worker_collects_the_same_episode_and_learns_at_every_step() -> None:
+    task = ensure_registered(TOY_TASK_ID)
+    env = gym.make(task)
+    serial, overlapped = SerialCollector(env), OverlappedCollector(task)
+    size = int(np.prod(env.action_space.shape))
+    try:
+        calls: list[int] = []
+        here = serial.episode(7, _actions(1, size), lambda step: None)
+        there = overlapped.episode(7, _actions(1, size), calls.append)
+        second = overlapped.episode(8, _actions(2, size), lambda step: None)
+    finally:
+        overlapped.close()
+        env.close()
+    for name in here._fields:
+        np.testing.assert_array_equal(getattr(here, name), getattr(there, name), err_msg=name)
+    assert calls == list(range(-1, len(there.action)))  # the reset, then every step
+    assert not np.array_equal(second.obs[0], there.obs[0])  # a new episode, from its own seed
+
+
+def test_an_overlapped_run_trains_and_keeps_a_policy(tmp_path: Path) -> None:
+    spec = RunSpec(
+        TOY_TASK_ID, seed=2, episodes=4, demos=2, out_dir=tmp_path, eval_every=2, eval_episodes=2,
+        progress=False, tensorboard=False, overlap=True,
+    )  # fmt: skip
+    result = train(spec, TrainConfig(algo="ddpgbc", random_steps=20, updates_per_episode=10))
+    assert result.policy_path.exists() and len(result.success_rates) == 2
+    assert result.env_steps > 20 and result.update_seconds >= 0.0
+
+
+def test_a_wrapper_that_cannot_reach_a_worker_is_refused_before_anything_runs(tmp_path: Path) -> None:
+    assert can_run_in_worker(None) and not can_run_in_worker(lambda env: env)
+    spec = RunSpec(TOY_TASK_ID, out_dir=tmp_path, overlap=True, env_wrapper=lambda env: env)
+    with pytest.raises(ConfigurationError, match="picklable"):
+        train(spec, TrainConfig())
+    assert not any(tmp_path.iterdir())
