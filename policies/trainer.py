@@ -84,6 +84,8 @@ class RunSpec:
             :func:`train` is called.
         overlap: Collect in a worker process, the updates running while the task simulates
             (:mod:`policies.collect`); False collects and then learns, in this process, as the paper's code.
+        stop_at_success: End the run at the first evaluation with at least this success rate; its
+            policy is ``policy.safetensors``. None: train all ``episodes``.
     """
 
     task_id: str
@@ -103,6 +105,7 @@ class RunSpec:
     budget_s: float | None = None
     started_s: float | None = None
     overlap: bool = False
+    stop_at_success: float | None = None
 
     def __post_init__(self) -> None:
         for name, low in (("seed", 0), ("episodes", 1), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
@@ -111,6 +114,11 @@ class RunSpec:
                 raise ConfigurationError(name, value, f"an integer >= {low}")
         if self.budget_s is not None and not (isinstance(self.budget_s, int | float) and 1.0 <= self.budget_s < 1e7):
             raise ConfigurationError("budget_s", self.budget_s, "a number of seconds from 1 to 1e7")
+        target = self.stop_at_success
+        if target is not None and (
+            isinstance(target, bool) or not (isinstance(target, int | float) and 0 < target <= 1)
+        ):
+            raise ConfigurationError("stop_at_success", self.stop_at_success, "a success rate in (0, 1]")
 
 
 @dataclass
@@ -132,6 +140,7 @@ class TrainResult:
     elapsed_s: float = 0.0
     policy_episode: int = 0
     policy_success: float = float("nan")
+    stopped_early: bool = False
 
     @property
     def steps_per_second(self) -> float:
@@ -357,7 +366,8 @@ def _train(
         result.success_rates.append((episode, success))
         logger.evaluation(episode, env_steps, agent.updates, success, result.steps_per_second)
         logger.scalars({f"train/{k}": v for k, v in metrics.items()}, env_steps)
-        best = budget.budget_s is None or not success < result.policy_success  # the first one: NaN
+        keeps_best = budget.budget_s is not None or spec.stop_at_success is not None
+        best = not keeps_best or not success < result.policy_success  # the first one: NaN
         checkpoint(episode, policy=best)
         if best:
             result.policy_episode, result.policy_success = episode, success
@@ -387,7 +397,9 @@ def _train(
                 return
             count = (step + 1) * config.updates_per_episode // horizon - step * config.updates_per_episode // horizon
             if count > 0:
+                start = time.perf_counter()
                 metrics = agent.train(buffer, demo_buffer, reward_fn, count) or metrics
+                result.update_seconds += time.perf_counter() - start
 
         return learn
 
@@ -422,9 +434,16 @@ def _train(
                 bar.update(1)
             if done % spec.eval_every == 0 or done == spec.episodes:
                 evaluation(done)
+                if spec.stop_at_success is not None and result.success_rates[-1][1] >= spec.stop_at_success:
+                    result.stopped_early = True
+                    break
         if start_episode >= spec.episodes:
             checkpoint(start_episode)
-        elif budget.budget_s is not None and (not result.success_rates or result.success_rates[-1][0] != done):
+        elif (
+            not result.stopped_early
+            and budget.budget_s is not None
+            and (not result.success_rates or result.success_rates[-1][0] != done)
+        ):
             evaluation(done)  # the budget ended the run between two evaluations
     finally:
         if bar is not None:

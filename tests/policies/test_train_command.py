@@ -13,8 +13,10 @@ import pytest
 
 from policies.checkpoint import load_checkpoint, load_policy
 from policies.config import ALGORITHMS, TrainConfig
+from policies.recipe import DEFAULT_RECIPE
 from policies.toy_env import TOY_TASK_ID
 from policies.trainer import _FINISH_RESERVE_S, RunSpec, _Budget, train
+from psm_control.errors import ConfigurationError
 from tissue_retract.cli import main
 
 
@@ -212,3 +214,32 @@ def test_a_budget_outside_its_range_is_refused_with_what_is_allowed(capsys: pyte
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert "--budget-s" in err and "Traceback" not in err
+
+
+def test_without_algo_the_recipe_trains_in_a_worker_and_stops_at_its_target(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """No --algo: the default recipe (CoL from the expert's demonstrations, a collecting worker) stops at the
+    first evaluation that reaches its target and keeps that policy; --algo keeps the paper's run."""
+    args = ["train", "--task", TOY_TASK_ID, "--episodes", "40", "--eval-every", "2", "--eval-episodes", "5"]
+    args += ["--out", str(tmp_path / "recipe"), "--no-progress", "--no-tensorboard"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert f"recipe {DEFAULT_RECIPE.name}: col, {DEFAULT_RECIPE.demos} demonstrations, collecting in a worker" in out
+    rows = [float(r["success_rate"]) for r in csv.DictReader((tmp_path / "recipe" / "eval.csv").open())]
+    assert rows[-1] >= DEFAULT_RECIPE.stop_at_success and all(r < DEFAULT_RECIPE.stop_at_success for r in rows[:-1])
+    stopped = 2 * len(rows)
+    assert f"stopped at episode {stopped}" in out and stopped < 40
+    assert load_checkpoint(tmp_path / "recipe" / "policy.safetensors").meta["progress"]["episodes"] == stopped
+    paper = ["train", "--task", TOY_TASK_ID, "--algo", "ddpg", "--episodes", "2", "--eval-every", "1"]
+    paper += ["--eval-episodes", "1", "--out", str(tmp_path / "paper"), "--no-progress", "--no-tensorboard"]
+    assert main(paper) == 0
+    out = capsys.readouterr().out
+    assert "recipe fast" not in out and "stopped at" not in out
+    assert len(list(csv.DictReader((tmp_path / "paper" / "eval.csv").open()))) == 2
+
+
+@pytest.mark.parametrize("target", [0.0, 1.5, "all", True])
+def test_a_stopping_target_that_is_no_success_rate_is_refused(target: object) -> None:
+    with pytest.raises(ConfigurationError, match="a success rate in"):
+        RunSpec(TOY_TASK_ID, stop_at_success=target)  # type: ignore[arg-type]

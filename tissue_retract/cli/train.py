@@ -1,9 +1,13 @@
-"""``tissue-retract train``: train DDPG+HER, SQIL, DDPGBC, CoL or DEX on a task.
+"""``tissue-retract train``: train a policy on a task, by the default recipe or one of the paper's algorithms.
+
+Without ``--algo`` the default recipe runs (:mod:`policies.recipe`: fast, both cores, early stopping);
+``--algo`` picks DDPG+HER, SQIL, DDPGBC, CoL or DEX, trained as the paper does.
 
 Writes to ``--out``: ``policy.safetensors`` (the deterministic actor, for ``evaluate`` and ``deploy``),
 ``resume.safetensors`` (everything needed to continue: running the same command again resumes from
-it), ``eval.csv`` (success rate per evaluation) and TensorBoard logs in ``tb/``. Defaults are the seed
-paper's; ``--set FIELD=VALUE`` overrides any field of :class:`policies.config.TrainConfig`.
+it), ``eval.csv`` (success rate per evaluation) and TensorBoard logs in ``tb/``. With ``--algo`` the
+defaults are the seed paper's; ``--set FIELD=VALUE`` overrides any field of
+:class:`policies.config.TrainConfig`.
 
 ``--blind`` (Tasks I-III) trains on what a robot without perception observes (``evaluate --blind``,
 ``deploy --site``): a site registered up to ``--registration-error-mm`` from the true one, a jaw-sensed
@@ -29,6 +33,7 @@ import gymnasium as gym
 
 from hardware_if.registered_env import RegisteredTask
 from policies.config import TrainConfig
+from policies.recipe import DEFAULT_RECIPE
 from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
 from psm_control.errors import ConfigurationError
 from tissue_retract.cli._blind import add_blind_arguments
@@ -39,6 +44,19 @@ __all__ = ["add_arguments", "parse_overrides", "run"]
 ALGOS = ("ddpg", "sqil", "ddpgbc", "col", "dex")
 
 
+@dataclasses.dataclass(frozen=True)
+class _PaperRun:
+    """How the paper's algorithms run with ``--algo`` (the seed paper's numbers)."""
+
+    demos: int = 100
+    episodes: int = 1000
+    eval_every: int = 50
+    eval_episodes: int = 50
+
+
+_PAPER_RUN = _PaperRun()
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
     parser.add_argument(
@@ -46,24 +64,46 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         required=True,
         help="Gymnasium id (TissueRetract-Lift-v0, TissueRetract-ToyReach-v0, ...) or a short name (lift, III)",
     )
-    parser.add_argument("--algo", choices=ALGOS, default="ddpg", help="algorithm (default: ddpg)")
+    parser.add_argument(
+        "--algo",
+        choices=ALGOS,
+        default=None,
+        help=f"one of the paper's algorithms, trained as the paper does (default: the {DEFAULT_RECIPE.name!r} "
+        f"recipe: {DEFAULT_RECIPE.config.algo} from {DEFAULT_RECIPE.demos} demonstrations, collecting in a worker "
+        f"process, stopping at {100 * DEFAULT_RECIPE.stop_at_success:g} %% held-out success)",
+    )
     parser.add_argument(
         "--demos",
         type=int_in(0, MAX_EPISODES),
-        default=100,
-        help="demonstration episodes (default: 100; unused by ddpg)",
+        default=None,
+        help=f"demonstration episodes (default: {DEFAULT_RECIPE.demos} for the recipe, 100 with --algo; "
+        "unused by ddpg)",
     )
     parser.add_argument("--demos-file", type=Path, default=None, help="read demonstrations from this .npz")
     parser.add_argument("--seed", type=int_in(0, MAX_SEED), default=1, help=f"seed 0-{MAX_SEED} (default: 1)")
     parser.add_argument(
-        "--episodes", type=int_in(1, MAX_EPISODES), default=1000, help="training episodes (default: 1000)"
+        "--episodes",
+        type=int_in(1, MAX_EPISODES),
+        default=None,
+        help=f"most training episodes (default: {DEFAULT_RECIPE.episodes} for the recipe, which usually stops "
+        "early; 1000 with --algo)",
     )
-    parser.add_argument("--out", type=Path, default=None, help="output directory (default: runs/TASK/ALGO-sSEED)")
     parser.add_argument(
-        "--eval-every", type=int_in(1, MAX_EPISODES), default=50, help="evaluate and checkpoint every N episodes"
+        "--out", type=Path, default=None, help="output directory (default: runs/TASK/ALGO-sSEED, RECIPE-sSEED)"
     )
     parser.add_argument(
-        "--eval-episodes", type=int_in(1, MAX_EPISODES), default=50, help="episodes per evaluation (default: 50)"
+        "--eval-every",
+        type=int_in(1, MAX_EPISODES),
+        default=None,
+        help=f"evaluate and checkpoint every N episodes (default: {DEFAULT_RECIPE.eval_every} for the recipe, "
+        "50 with --algo)",
+    )
+    parser.add_argument(
+        "--eval-episodes",
+        type=int_in(1, MAX_EPISODES),
+        default=None,
+        help=f"held-out episodes per evaluation (default: {DEFAULT_RECIPE.eval_episodes} for the recipe, "
+        "50 with --algo)",
     )
     parser.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", help="override a TrainConfig field (JSON value)"
@@ -110,9 +150,18 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigurationError(
                 "--set", name, "a TrainConfig field other than algo: " + ", ".join(sorted(known - {"algo"}))
             )
-    config = TrainConfig(algo=args.algo, **overrides)  # type: ignore[arg-type]
+    recipe = DEFAULT_RECIPE if args.algo is None else None
+    if recipe is not None:
+        config = dataclasses.replace(recipe.config, **overrides)  # type: ignore[arg-type]
+    else:
+        config = TrainConfig(algo=args.algo, **overrides)  # type: ignore[arg-type]
+    defaults = _PAPER_RUN if recipe is None else recipe
+    for name in ("demos", "episodes", "eval_every", "eval_episodes"):
+        if getattr(args, name) is None:
+            setattr(args, name, getattr(defaults, name))
     args.task = ensure_registered(args.task)
-    out = args.out if args.out is not None else Path("runs") / args.task / f"{args.algo}-s{args.seed}"
+    run_name = args.algo if recipe is None else recipe.name
+    out = args.out if args.out is not None else Path("runs") / args.task / f"{run_name}-s{args.seed}"
     check_out_folder(out, (POLICY_FILE, RESUME_FILE, "eval.csv"), (args.demos_file,))
     command = shlex.join(["tissue-retract", *sys.argv[1:]]) if sys.argv[1:2] == ["train"] else _rebuild(args)
     spec = RunSpec(
@@ -132,12 +181,23 @@ def run(args: argparse.Namespace) -> int:
         observation=f"blind, registration error up to {args.registration_error_mm:g} mm" if args.blind else "task",
         budget_s=args.budget_s,
         started_s=_command_started_s() if sys.argv[1:2] == ["train"] else None,  # else: called in-process
+        overlap=recipe is not None and recipe.overlap and not args.blind,  # --blind's wrapper stays here
+        stop_at_success=None if recipe is None else recipe.stop_at_success,
     )
+    if recipe is not None:
+        print(
+            f"recipe {recipe.name}: {config.algo}, {args.demos} demonstrations, "
+            f"{'collecting in a worker process, ' if spec.overlap else ''}"
+            f"stopping at {100 * recipe.stop_at_success:g} % on {args.eval_episodes} held-out episodes "
+            f"(evaluated every {args.eval_every})"
+        )
     result = train(spec, config)
     if result.resumed_from:
         print(f"resumed from episode {result.resumed_from}")
     for episode, success in result.success_rates:
         print(f"episode {episode:6d}: success {100 * success:5.1f} %")
+    if result.stopped_early:
+        print(f"stopped at episode {result.policy_episode}: held-out success reached the recipe's target")
     if args.budget_s is not None:
         over = result.elapsed_s - args.budget_s
         print(
@@ -172,7 +232,10 @@ def _blind(registration_error_mm: float) -> Callable[[gym.Env[Any, Any]], gym.En
 
 
 def _rebuild(args: argparse.Namespace) -> str:
-    parts = ["tissue-retract", "train", "--task", args.task, "--algo", args.algo, "--demos", str(args.demos)]
+    parts = ["tissue-retract", "train", "--task", args.task]
+    if args.algo is not None:
+        parts += ["--algo", args.algo]
+    parts += ["--demos", str(args.demos)]
     parts += ["--seed", str(args.seed), "--episodes", str(args.episodes)]
     if args.out is not None:
         parts += ["--out", str(args.out)]
