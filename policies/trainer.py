@@ -403,10 +403,18 @@ def _train(
 
         return learn
 
+    def reached(episode: int) -> bool:
+        """Evaluate; True when the evaluation reaches ``stop_at_success`` (early stopping)."""
+        evaluation(episode)
+        result.stopped_early = spec.stop_at_success is not None and result.success_rates[-1][1] >= spec.stop_at_success
+        return result.stopped_early
+
     done = start_episode
     try:
+        if spec.stop_at_success is not None and start_episode == 0 and demos:
+            reached(0)  # what the demonstrations alone taught: enough already?
         for episode_index in range(start_episode, spec.episodes):
-            if not budget.fits_episode(spec.eval_episodes, horizon):
+            if result.stopped_early or not budget.fits_episode(spec.eval_episodes, horizon):
                 break
             t0, c0 = time.perf_counter(), time.process_time()
             seed = spec.seed * 1_000_003 + episode_index
@@ -432,11 +440,8 @@ def _train(
             done = episode_index + 1
             if bar is not None:
                 bar.update(1)
-            if done % spec.eval_every == 0 or done == spec.episodes:
-                evaluation(done)
-                if spec.stop_at_success is not None and result.success_rates[-1][1] >= spec.stop_at_success:
-                    result.stopped_early = True
-                    break
+            if (done % spec.eval_every == 0 or done == spec.episodes) and reached(done):
+                break
         if start_episode >= spec.episodes:
             checkpoint(start_episode)
         elif (

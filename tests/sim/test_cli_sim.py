@@ -77,6 +77,20 @@ def test_bench_env_reports_rates(tmp_path: Path) -> None:
     assert numbers["env_steps_per_s"] > 0 and numbers["render_env_steps_per_s"] > 0
 
 
+def test_bench_train_times_the_recipe_and_confirms_on_unseen_episodes(tmp_path: Path) -> None:
+    """`bench train`: a recipe run per seed, timed from outside, its kept policy scored on unseen episodes."""
+    path = tmp_path / "train.json"
+    args = ("--tasks", "lift", "--seeds", "4", "--confirm-episodes", "2", "--budget-s", "20")
+    result = _cli("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path))
+    assert result.returncode == 0, result.stderr
+    (run,) = json.loads(path.read_text())["runs"]
+    log = Path(run["log"]).read_text()
+    assert run["exit_status"] == 0 and "recipe fast" in log, log
+    assert f"kept episode {run['policy_episode']}, confirmed {100 * run['confirmed_success']:.0f} %" in result.stdout
+    assert run["wall_s"] > 0 and run["reached"] == (run["confirmed_success"] >= 0.95)
+    assert "TissueRetract-Lift-v0" in result.stdout.splitlines()[-1]
+
+
 def test_tissue_test_prints_and_writes_both_tests(tmp_path: Path) -> None:
     """`tissue-test` measures tension within 10 % of E t W eps and writes both tests with their curves."""
     out = tmp_path / "material.json"

@@ -36,7 +36,7 @@ SUBCOMMANDS: dict[str, str] = {
     "register": "register the grasp site by holding the jaws on it (for deploy --site)",
     "sim-dvrk": "serve the dVRK's CRTK topics from the simulation",
     "replay": "summarise and plot a recorded run",
-    "bench": "measure speed (env, chain, ros) and run the fault matrix (faults)",
+    "bench": "measure speed (env, chain, ros, train) and run the fault matrix (faults)",
     "safety": "show the effective safety limits",
 }
 
