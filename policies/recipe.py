@@ -3,8 +3,10 @@
 The paper's algorithms train for a fixed 1,000 episodes, one core collecting and learning in turn. The
 recipe aims at a competent policy in as little wall time as a 2-core machine allows:
 
-- Behaviour cloning from the scripted expert's demonstrations first (CoL's pretraining), so the first
-  episodes already reach the tissue, then CoL's combined actor loss (RL plus behaviour cloning).
+- Behaviour cloning from the scripted expert's demonstrations first (CoL's pretraining), evaluated at
+  once: on Tasks I-III that alone often reaches the target. Then CoL's combined actor loss with a strong
+  cloning term: with the critic still untrained, the paper's weight (5) let the actor's Q term undo the
+  cloned policy within tens of episodes (Target: 65 % held-out after cloning, 0 % 44 episodes later).
 - No uniformly random steps: the cloned policy plus exploration noise explores where it matters.
 - Collection in a worker process, the updates running while the task simulates (:mod:`policies.collect`).
 - Early stopping on held-out success: small evaluations often, the run ends at the first that reaches
@@ -51,8 +53,8 @@ class Recipe:
 #: ``tissue-retract train`` without ``--algo``.
 DEFAULT_RECIPE = Recipe(
     name="fast",
-    config=TrainConfig(algo="col", bc_pretrain_steps=1_000, random_steps=0, updates_per_episode=50),
-    demos=30,
+    config=TrainConfig(algo="col", bc_pretrain_steps=2_000, bc_weight=50.0, random_steps=0, updates_per_episode=50),
+    demos=100,
     episodes=2_000,
     eval_every=10,
     eval_episodes=20,
