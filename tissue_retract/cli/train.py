@@ -181,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
         observation=f"blind, registration error up to {args.registration_error_mm:g} mm" if args.blind else "task",
         budget_s=args.budget_s,
         started_s=_command_started_s() if sys.argv[1:2] == ["train"] else None,  # else: called in-process
-        overlap=recipe is not None and recipe.overlap and not args.blind,  # --blind's wrapper stays here
+        overlap=recipe is not None and recipe.overlap,
         stop_at_success=None if recipe is None else recipe.stop_at_success,
     )
     if recipe is not None:
