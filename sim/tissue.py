@@ -269,10 +269,8 @@ class Tissue:
         # an anchored grasp drags one node through it (measured: a 2 cm lift moved the neighbours 0 mm, and
         # the spring forces of that artefact read up to 2 N in an episode whose true peak was 0.2 N).
         p.changeDynamics(self.body_id, -1, activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=client)
-        visual: dict[str, object] = {"rgbaColor": list(params.rgba)}
-        if params.texture_seed is not None:
-            visual["textureUniqueId"] = p.loadTexture(texture_file(params.texture_seed), physicsClientId=client)
-        p.changeVisualShape(self.body_id, -1, physicsClientId=client, **visual)
+        p.changeVisualShape(self.body_id, -1, rgbaColor=list(params.rgba), physicsClientId=client)
+        self._texture_pending = params.texture_seed is not None
         pairs = np.concatenate([self.triangles[:, [0, 1]], self.triangles[:, [1, 2]], self.triangles[:, [2, 0]]])
         self.edges = np.unique(np.sort(pairs, axis=1), axis=0)
         self.rest_lengths = np.linalg.norm(vertices[self.edges[:, 1]] - vertices[self.edges[:, 0]], axis=1)
@@ -290,6 +288,17 @@ class Tissue:
             "left": np.array([-params.site_spacing_m, edge_y, 0.0]),
             "right": np.array([params.site_spacing_m, edge_y, 0.0]),
         }
+
+    def show_texture(self) -> None:
+        """Put the procedural texture on the flap, once, before its first render.
+
+        Not at construction: drawing and loading a texture costs about a millisecond per episode, and most
+        episodes (training, evaluation) are never rendered.
+        """
+        if self._texture_pending and self.params.texture_seed is not None:
+            texture = p.loadTexture(texture_file(self.params.texture_seed), physicsClientId=self.client)
+            p.changeVisualShape(self.body_id, -1, textureUniqueId=texture, physicsClientId=self.client)
+        self._texture_pending = False
 
     def _lumped_masses(self, vertices: np.ndarray) -> np.ndarray:
         """Node masses by a third of the adjacent triangle areas, as Bullet's ``setTotalMass(m, true)``."""

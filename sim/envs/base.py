@@ -284,6 +284,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if self.scene is None:
             raise RuntimeError("call reset() before rendering")
         s = self.scene
+        s.tissue.show_texture()
         bodies = {"tissue": s.tissue.body_id, "hidden_tissue": s.hidden_id, "instrument": s.body.body_id}
         return render(self.client, self.config.camera, s.tissue_origin, bodies)
 
