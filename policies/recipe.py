@@ -4,9 +4,10 @@ The paper's algorithms train for a fixed 1,000 episodes, one core collecting and
 recipe aims at a competent policy in as little wall time as a 2-core machine allows:
 
 - Behaviour cloning from 200 of the scripted expert's demonstrations first (CoL's pretraining),
-  evaluated at once: on Tasks I-III that alone usually reaches the target (``bench train``). Then CoL's combined actor loss with a strong
-  cloning term: with the critic still untrained, the paper's weight (5) let the actor's Q term undo the
-  cloned policy within tens of episodes (Target: 65 % held-out after cloning, 0 % 44 episodes later).
+  evaluated at once: on Tasks I-III that alone usually reaches the target (``bench train``). Then
+  CoL's combined actor loss with a strong cloning term: with the critic still untrained, the paper's
+  weight (5) let the actor's Q term undo the cloned policy within tens of episodes (Target, from 30
+  demonstrations: 65 % held-out after cloning, 0 % 44 episodes later).
 - No uniformly random steps: the cloned policy plus exploration noise explores where it matters.
 - Collection in a worker process, the updates running while the task simulates (:mod:`policies.collect`).
 - Early stopping on held-out success: small evaluations often, the run ends at the first that reaches
