@@ -72,38 +72,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f"recipe: {DEFAULT_RECIPE.config.algo} from {DEFAULT_RECIPE.demos} demonstrations, collecting in a worker "
         f"process, stopping at {100 * DEFAULT_RECIPE.stop_at_success:g} %% held-out success)",
     )
-    parser.add_argument(
-        "--demos",
-        type=int_in(0, MAX_EPISODES),
-        default=None,
-        help=f"demonstration episodes (default: {DEFAULT_RECIPE.demos} for the recipe, 100 with --algo; "
-        "unused by ddpg)",
-    )
+    for flag, low, what, note in (
+        ("--demos", 0, "demonstration episodes", "; unused by ddpg"),
+        ("--episodes", 1, "most training episodes", "; the recipe usually stops early"),
+        ("--eval-every", 1, "evaluate and checkpoint every N episodes", ""),
+        ("--eval-episodes", 1, "held-out episodes per evaluation", ""),
+    ):
+        name = flag[2:].replace("-", "_")
+        parser.add_argument(
+            flag,
+            type=int_in(low, MAX_EPISODES),
+            default=None,
+            help=f"{what} (default: {getattr(DEFAULT_RECIPE, name)} for the recipe, "
+            f"{getattr(_PAPER_RUN, name)} with --algo{note})",
+        )
     parser.add_argument("--demos-file", type=Path, default=None, help="read demonstrations from this .npz")
     parser.add_argument("--seed", type=int_in(0, MAX_SEED), default=1, help=f"seed 0-{MAX_SEED} (default: 1)")
     parser.add_argument(
-        "--episodes",
-        type=int_in(1, MAX_EPISODES),
-        default=None,
-        help=f"most training episodes (default: {DEFAULT_RECIPE.episodes} for the recipe, which usually stops "
-        "early; 1000 with --algo)",
-    )
-    parser.add_argument(
         "--out", type=Path, default=None, help="output directory (default: runs/TASK/ALGO-sSEED, RECIPE-sSEED)"
-    )
-    parser.add_argument(
-        "--eval-every",
-        type=int_in(1, MAX_EPISODES),
-        default=None,
-        help=f"evaluate and checkpoint every N episodes (default: {DEFAULT_RECIPE.eval_every} for the recipe, "
-        "50 with --algo)",
-    )
-    parser.add_argument(
-        "--eval-episodes",
-        type=int_in(1, MAX_EPISODES),
-        default=None,
-        help=f"held-out episodes per evaluation (default: {DEFAULT_RECIPE.eval_episodes} for the recipe, "
-        "50 with --algo)",
     )
     parser.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", help="override a TrainConfig field (JSON value)"
