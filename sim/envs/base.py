@@ -28,6 +28,7 @@ from sim.control import make_controller
 from sim.exposure import exposed_fraction, surface_samples
 from sim.grasp import GraspParams
 from sim.mechanics import DamageLimits, grasp_force, measure, spring_strain
+from sim.psm_body import PsmBody
 from sim.randomization import INSERTION_M_PER_RAD, Randomizer
 from sim.rendering import Camera, Frame, render
 from sim.scene import HIDDEN_HALF_EXTENTS_M, PhysicsParams, Scene
@@ -103,6 +104,8 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.randomizer = Randomizer(self.config.randomization)
         self.model = PsmModel()
         self.client = p.connect(p.DIRECT)
+        self._arm_client = p.connect(p.DIRECT)  # the kinematic arm's own, never stepped (see sim.scene)
+        self.arm = PsmBody(self._arm_client, self.model)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(5,), dtype=np.float32)
         box = gym.spaces.Box(-np.inf, np.inf, shape=(_OBS_SIZE,), dtype=np.float32)
         goal = gym.spaces.Box(-np.inf, np.inf, shape=(self.goal_size,), dtype=np.float32)
@@ -151,7 +154,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._joint_offset, self._base_error = self._dynamics_errors(dynamics_rng)
         self.site = str(task.get("site", self._choose_site(self.np_random)))
         cfg = self.config
-        self.scene = Scene(self.client, self.model, self.values, cfg.physics, cfg.grasp, cfg.tissue)
+        self.scene = Scene(self.client, self.arm, self.values, cfg.physics, cfg.grasp, cfg.tissue)
         if self.site not in self.scene.tissue.site_local:
             raise UnknownVariantError("site", self.site, list(self.scene.tissue.site_local))
         offset = np.array([self.values["site_offset_x_m"], self.values["site_offset_y_m"], 0.0])
@@ -285,14 +288,16 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             raise RuntimeError("call reset() before rendering")
         s = self.scene
         s.tissue.show_texture()
-        bodies = {"tissue": s.tissue.body_id, "hidden_tissue": s.hidden_id, "instrument": s.body.body_id}
-        return render(self.client, self.config.camera, s.tissue_origin, bodies)
+        with s.arm_in_view() as instrument:
+            bodies = {"tissue": s.tissue.body_id, "hidden_tissue": s.hidden_id, "instrument": instrument}
+            return render(self.client, self.config.camera, s.tissue_origin, bodies)
 
     def close(self) -> None:
-        """Disconnect the physics client."""
-        if self.client >= 0 and p.isConnected(self.client):
-            p.disconnect(self.client)
-        self.client = -1
+        """Disconnect the physics client and the arm's."""
+        for client in (self.client, self._arm_client):
+            if client >= 0 and p.isConnected(client):
+                p.disconnect(client)
+        self.client = self._arm_client = -1
 
     # ----------------------------------------------------------------- internals
     def site_position(self) -> np.ndarray:

@@ -37,14 +37,15 @@ def test_ray_exposure_matches_segmentation() -> None:
                     camera = u.config.camera.__class__(**{**u.config.camera.__dict__, "width": 256, "height": 256})
                     view, projection = camera.matrices(u.scene.tissue_origin, u.client)
                     frame = u.render_frame()
-                    _, _, _, _, seg = p.getCameraImage(
-                        256, 256, view, projection, renderer=p.ER_TINY_RENDERER, physicsClientId=u.client
-                    )
+                    with u.scene.arm_in_view() as instrument_id:
+                        _, _, _, _, seg = p.getCameraImage(
+                            256, 256, view, projection, renderer=p.ER_TINY_RENDERER, physicsClientId=u.client
+                        )
                     seg = np.reshape(np.asarray(seg), (256, 256))
                     pixels = _project(u._exposure_points, u.client, view, projection, 256, 256)
                     rendered = seg[pixels[:, 0], pixels[:, 1]] == u.scene.hidden_id
                     rays = exposed_mask(u._exposure_points, u._eye, u._nodes, u.scene.tissue.triangles)
-                    instrument = seg[pixels[:, 0], pixels[:, 1]] == u.scene.body.body_id
+                    instrument = seg[pixels[:, 0], pixels[:, 1]] == instrument_id
                     keep = ~instrument
                     agreements.append(np.mean(rendered[keep] == rays[keep]))
                     fractions.append(rays.mean())
