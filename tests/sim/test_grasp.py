@@ -7,7 +7,7 @@ import pybullet as p
 import pytest
 
 from sim.grasp import Grasp, GraspParams, closest_points_on_triangles
-from sim.tissue import Tissue, TissueParams
+from sim.tissue import Tissue, TissueParams, grid_mesh
 
 
 def test_closest_points_match_a_dense_sampling_of_each_triangle() -> None:
@@ -27,6 +27,43 @@ def test_closest_points_match_a_dense_sampling_of_each_triangle() -> None:
             assert found <= sampled + 1e-12
             u, v = np.linalg.lstsq(np.column_stack([b[i] - a[i], c[i] - a[i]]), nearest[i] - a[i], rcond=None)[0]
             assert u >= -1e-9 and v >= -1e-9 and u + v <= 1 + 1e-9  # on the triangle
+
+
+def _closest_points_numpy(point: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Reference: the same arithmetic on every triangle at once, in NumPy."""
+    candidates = []
+    for start, end in ((a, b), (b, c), (c, a)):
+        span = end - start
+        t = np.einsum("ij,ij->i", point - start, span) / np.maximum(np.einsum("ij,ij->i", span, span), 1e-24)
+        candidates.append(start + np.clip(t, 0.0, 1.0)[:, None] * span)
+    ab, ac, ap = b - a, c - a, point - a
+    normal = np.cross(ab, ac)
+    normal_sq = np.maximum(np.einsum("ij,ij->i", normal, normal), 1e-24)
+    projected = point - (np.einsum("ij,ij->i", ap, normal) / normal_sq)[:, None] * normal
+    u = np.einsum("ij,ij->i", np.cross(projected - a, ac), normal) / normal_sq
+    v = np.einsum("ij,ij->i", np.cross(ab, projected - a), normal) / normal_sq
+    inside = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0)
+    candidates.append(np.where(inside[:, None], projected, np.inf))
+    stacked = np.stack(candidates)
+    distance = np.linalg.norm(stacked - point, axis=2)
+    return np.asarray(stacked[np.argmin(distance, axis=0), np.arange(len(a))])
+
+
+def test_closest_points_are_the_numpy_formulas_bit_for_bit() -> None:
+    """The compiled query returns exactly the points of the vectorised NumPy arithmetic, on flaps and at random."""
+    rng = np.random.default_rng(8)
+    vertices, triangles = grid_mesh(7, 0.08)
+    for trial in range(300):
+        if trial % 2:
+            a, b, c = (rng.normal(size=(72, 3)) for _ in range(3))
+            point = 2 * rng.normal(size=3)
+        else:  # a crumpled flap and a grasp point near it
+            nodes = vertices + rng.normal(scale=0.01, size=vertices.shape)
+            a, b, c = (nodes[triangles[:, k]] for k in range(3))
+            point = nodes[rng.integers(len(nodes))] + rng.normal(scale=0.01, size=3)
+        np.testing.assert_array_equal(
+            closest_points_on_triangles(point, a, b, c), _closest_points_numpy(point, a, b, c)
+        )
 
 
 def _flat_flap() -> tuple[int, Tissue]:
