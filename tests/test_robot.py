@@ -116,3 +116,21 @@ def test_unknown_frame_lists_valid_frames(classic: PsmModel) -> None:
     """Asking for a frame the URDF lacks names the valid ones."""
     with pytest.raises(JointVectorError, match="tool_tip_link"):
         classic.configuration().frame_pose_local("no_such_frame")
+
+
+def test_kinematics_kept_for_unchanged_joints_equal_fresh_ones(classic: PsmModel) -> None:
+    """Through any sequence of updates, repeated joints included, every pose and Jacobian equals a fresh state's."""
+    rng = np.random.default_rng(12)
+    state = classic.configuration()
+    frames = ("tool_tip_link", "grasp_link", "jaw_left_link")
+    home = classic.home()
+    for _ in range(60):
+        q = home + rng.normal(scale=0.2, size=6) * (rng.random() < 0.6)  # often unchanged: exactly home
+        jaw = float(rng.choice([0.0, 0.3, 0.6]))
+        state.update(q, jaw if rng.random() < 0.7 else None)
+        fresh = classic.configuration(state.q, state.jaw)
+        np.testing.assert_array_equal(state.local_pose(), fresh.local_pose())
+        np.testing.assert_array_equal(state.local_jacobian(), fresh.local_jacobian())
+        for frame in frames:
+            np.testing.assert_array_equal(state.frame_pose_local(frame), fresh.frame_pose_local(frame))
+            np.testing.assert_array_equal(state.local_jacobian(frame), fresh.local_jacobian(frame))
