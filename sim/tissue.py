@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import atexit
 import collections
+import functools
 import os
 import shutil
 import struct
@@ -103,16 +104,27 @@ def grid_mesh(resolution: int, size_m: float) -> tuple[np.ndarray, np.ndarray]:
     xs = np.linspace(-size_m / 2.0, size_m / 2.0, resolution)
     gx, gy = np.meshgrid(xs, xs)
     vertices = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
-    triangles = []
+    return vertices, _grid_topology(resolution)[0].copy()
+
+
+# The flap's size is drawn per episode and its resolution is not: its triangles and springs are listed once.
+@functools.cache
+def _grid_topology(resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles (T, 3) of :func:`grid_mesh` and the node pairs (E, 2) of their edges, sorted (read-only)."""
+    listed = []
     for j in range(resolution - 1):
         for i in range(resolution - 1):
             a = j * resolution + i
             b, c = a + 1, a + resolution
             if (i + j) % 2 == 0:
-                triangles += [(a, b, c + 1), (a, c + 1, c)]
+                listed += [(a, b, c + 1), (a, c + 1, c)]
             else:
-                triangles += [(a, b, c), (b, c + 1, c)]
-    return vertices, np.array(triangles, dtype=int)
+                listed += [(a, b, c), (b, c + 1, c)]
+    triangles = np.array(listed, dtype=int)
+    pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    edges = np.unique(np.sort(pairs, axis=1), axis=0)
+    triangles.flags.writeable = edges.flags.writeable = False
+    return triangles, edges
 
 
 #: Side of the square texture images [px].
@@ -271,8 +283,7 @@ class Tissue:
         p.changeDynamics(self.body_id, -1, activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=client)
         p.changeVisualShape(self.body_id, -1, rgbaColor=list(params.rgba), physicsClientId=client)
         self._texture_pending = params.texture_seed is not None
-        pairs = np.concatenate([self.triangles[:, [0, 1]], self.triangles[:, [1, 2]], self.triangles[:, [2, 0]]])
-        self.edges = np.unique(np.sort(pairs, axis=1), axis=0)
+        self.edges = _grid_topology(params.resolution)[1].copy()
         self.rest_lengths = np.linalg.norm(vertices[self.edges[:, 1]] - vertices[self.edges[:, 0]], axis=1)
         self.node_mass_kg = self._lumped_masses(vertices)
         n = params.resolution
@@ -321,10 +332,12 @@ class Tissue:
     def site_binding(self, local_point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The triangle holding a material point of the flat flap, and its barycentric weights."""
         rest = self.rest_positions - self.origin
-        for triangle in self.triangles:
-            a, b, c = rest[triangle, :2]
-            matrix = np.column_stack([b - a, c - a])
-            u, v = np.linalg.solve(matrix, local_point[:2] - a)
-            if u >= -1e-9 and v >= -1e-9 and u + v <= 1 + 1e-9:
-                return triangle.copy(), np.array([1.0 - u - v, u, v])
-        raise ConfigurationError("site", local_point.tolist(), "a point inside the flap")
+        a, b, c = (rest[self.triangles[:, k], :2] for k in range(3))
+        # Every triangle's 2 x 2 system in one call: the same LAPACK solve per triangle as one call each.
+        matrices = np.stack([b - a, c - a], axis=2)
+        u, v = np.linalg.solve(matrices, (local_point[:2] - a)[:, :, None])[:, :, 0].T
+        inside = np.flatnonzero((u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9))
+        if inside.size == 0:
+            raise ConfigurationError("site", local_point.tolist(), "a point inside the flap")
+        first = inside[0]
+        return self.triangles[first].copy(), np.array([1.0 - u[first] - v[first], u[first], v[first]])
