@@ -17,15 +17,20 @@ class BaseTransform:
 
     Args:
         transform_rcm_to_base: 4x4 homogeneous transform (already validated by the caller).
+
+    Attributes:
+        transform_base_to_rcm: The inverse 4x4 transform, computed once (the chain takes every policy
+            step's goal back into the RCM frame with it).
     """
 
-    __slots__ = ("_identity", "rotation", "translation")
+    __slots__ = ("_identity", "rotation", "transform_base_to_rcm", "translation")
 
     def __init__(self, transform_rcm_to_base: np.ndarray) -> None:
         transform = np.asarray(transform_rcm_to_base, dtype=float)
         self.rotation = transform[:3, :3].copy()
         self.translation = transform[:3, 3].copy()
         self._identity = bool(np.array_equal(self.rotation, np.eye(3)))
+        self.transform_base_to_rcm = np.linalg.inv(transform)
 
     def point(self, point_rcm: np.ndarray) -> np.ndarray:
         """A point (3,) in the base frame (a new array)."""

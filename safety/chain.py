@@ -203,7 +203,7 @@ class ControlChain:
             goal = self._measured_state.measured_pose()
             goal[:3, 3] += translation
             goal[:3, :3] = rotation @ goal[:3, :3]
-            goal = np.linalg.inv(self._measured_state.base_frame) @ goal
+            goal = self._base.transform_base_to_rcm @ goal
         else:
             goal = self._measured_state.local_pose()
             goal[:3, 3] += translation

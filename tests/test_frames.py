@@ -26,3 +26,11 @@ def test_an_identity_rotation_gives_exactly_the_translated_point_and_does_not_al
     assert np.array_equal(moved, point + transform[:3, 3]) and moved is not point
     rows = np.arange(18.0).reshape(3, 6)
     assert np.array_equal(base.vectors(rows), rows)
+
+
+def test_the_kept_inverse_takes_base_points_back_to_the_rcm() -> None:
+    """The inverse kept at construction undoes the transform, and is the one a fresh inversion gives."""
+    transform = pin.SE3.Random().homogeneous
+    base = BaseTransform(transform)
+    np.testing.assert_allclose(base.transform_base_to_rcm @ transform, np.eye(4), atol=1e-12)
+    np.testing.assert_array_equal(base.transform_base_to_rcm, np.linalg.inv(transform))
