@@ -204,13 +204,12 @@ class Scene:
     def arm_in_view(self) -> Iterator[int]:
         """The arm copied into the physics client at its current joints, for one render; its body id.
 
-        Removed on exit, so that the physics never steps it: the tissue moves the same, frame or not.
+        Removed on exit, so that the physics never steps it (nor tests its collisions): the tissue moves
+        the same, frame or not.
         """
         arm = self.body
         copy = PsmBody(self.client, arm.model, arm.rcm_position, arm.rcm_orientation)
         try:
-            for link in range(-1, p.getNumJoints(copy.body_id, physicsClientId=self.client)):
-                p.setCollisionFilterGroupMask(copy.body_id, link, 0, 0, physicsClientId=self.client)
             copy.reset_joints(*arm.joint_states())
             yield copy.body_id
         finally:
