@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pybullet as p
+import pytest
 
+import sim.grasp
 from psm_control.robot import PsmModel
+from sim.expert import ScriptedExpert
 from sim.psm_body import PsmBody
 from sim.rendering import CLASSES
 from tests.sim.conftest import make_env
@@ -81,3 +84,32 @@ def test_a_moved_arm_is_one_loaded_there() -> None:
         assert jaw == 0.4
     finally:
         p.disconnect(client)
+
+
+def _expert_episode(seed: int) -> tuple[float, bool, int]:
+    """Peak force [N], success and length of one scripted Task III episode."""
+    env = make_env("multisite")
+    try:
+        expert = ScriptedExpert(env)
+        obs, _ = env.reset(seed=seed)
+        expert.reset()
+        peak, steps, done = 0.0, 0, False
+        while not done:
+            obs, _, terminated, truncated, info = env.step(expert(obs))
+            peak, steps, done = max(peak, info["force_peak_n"]), steps + 1, terminated or truncated
+        return peak, bool(info["is_success"]), steps
+    finally:
+        env.close()
+
+
+def test_a_grasp_a_sag_away_gives_the_same_episode(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Grasps closed 0.2 um off the grasp point (the most the simulated arm used to sag between set-points)
+    change an expert episode's peak force by under 1e-4 N, and neither its success nor its length."""
+    exact = [_expert_episode(seed) for seed in (7700000, 7700002)]
+    update = sim.grasp.Grasp.update
+    sag = np.array([1.2e-7, -0.8e-7, -1.4e-7])  # 0.2 um
+    monkeypatch.setattr(sim.grasp.Grasp, "update", lambda self, jaw, at, *rest: update(self, jaw, at + sag, *rest))
+    sagged = [_expert_episode(seed) for seed in (7700000, 7700002)]
+    for (peak, success, steps), (peak_sagged, success_sagged, steps_sagged) in zip(exact, sagged, strict=True):
+        assert (success, steps) == (success_sagged, steps_sagged)
+        assert abs(peak - peak_sagged) < 1e-4
