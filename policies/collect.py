@@ -22,6 +22,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.vector.async_vector_env import _async_worker
 
 from policies.buffers import Episode
 
@@ -40,6 +41,19 @@ class _WithoutInfo(gym.Wrapper[Any, Any, Any, Any]):
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, _ = self.env.step(action)
         return observation, reward, terminated, truncated, {}
+
+
+def _worker_ending_quietly(*args: Any) -> None:
+    """Gymnasium's worker loop, ending without a traceback when this process's parent is gone.
+
+    A parent killed outright (SIGKILL, the OOM killer) closes its end of the pipe: Gymnasium's worker
+    then fails to read a command (EOFError), tries to report it on the same pipe (BrokenPipeError) and
+    dies printing both tracebacks into the user's terminal. The worker has nothing to save, so it ends.
+    """
+    try:
+        _async_worker(*args)
+    except (EOFError, BrokenPipeError, ConnectionResetError):
+        return
 
 
 class _TaskFactory:
@@ -151,7 +165,9 @@ class OverlappedCollector(Collector):
 
     def __init__(self, task_id: str, wrapper: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None) -> None:
         # spawn, not fork: the parent has torch's and PyBullet's threads and state, which fork copies badly.
-        self._envs = gym.vector.AsyncVectorEnv([_TaskFactory(task_id, wrapper)], context="spawn")
+        self._envs = gym.vector.AsyncVectorEnv(
+            [_TaskFactory(task_id, wrapper)], context="spawn", worker=_worker_ending_quietly
+        )
 
     def _start_reset(self, seed: int) -> None:
         self._envs.reset_async(seed=[seed])

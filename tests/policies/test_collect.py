@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -56,3 +58,33 @@ def test_a_wrapper_that_cannot_reach_a_worker_is_refused_before_anything_runs(tm
     with pytest.raises(ConfigurationError, match="picklable"):
         train(spec, TrainConfig())
     assert not any(tmp_path.iterdir())
+
+
+_CHILD = """
+import sys
+from policies.collect import OverlappedCollector
+from policies.toy_env import TOY_TASK_ID
+from policies.trainer import ensure_registered
+
+collector = OverlappedCollector(ensure_registered(TOY_TASK_ID))
+collector.episode(1, lambda obs: [0.0] * 5, lambda step: None)
+print("collected", flush=True)
+sys.stdin.read()  # until killed
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="SIGKILL")
+def test_a_killed_parent_leaves_its_worker_to_end_without_a_traceback() -> None:
+    """SIGKILL of the learner: its collecting worker ends by itself and prints no traceback."""
+    child = subprocess.Popen(
+        [sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert child.stdout is not None and child.stdout.readline() == "collected\n"
+        child.kill()
+        child.wait(timeout=60)
+        # The worker inherited stderr: its end of file means the worker has ended too.
+        _, err = child.communicate(timeout=120)
+    finally:
+        child.kill()
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
