@@ -11,10 +11,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from policies.algos import Dims
 from policies.collect import OverlappedCollector, SerialCollector, can_run_in_worker
 from policies.config import TrainConfig
+from policies.demos import collect_demos, expert_for
 from policies.toy_env import TOY_TASK_ID
-from policies.trainer import RunSpec, ensure_registered, train
+from policies.trainer import RunSpec, _demonstrations, ensure_registered, train
 from psm_control.errors import ConfigurationError
 
 
@@ -40,6 +42,44 @@ def test_the_worker_collects_the_same_episode_and_learns_at_every_step() -> None
         np.testing.assert_array_equal(getattr(here, name), getattr(there, name), err_msg=name)
     assert calls == list(range(-1, len(there.action)))  # the reset, then every step
     assert not np.array_equal(second.obs[0], there.obs[0])  # a new episode, from its own seed
+
+
+def test_the_worker_collects_the_demonstrations_this_process_would() -> None:
+    """Demonstrations asked of the worker are the expert's episodes from the same seeds, as here."""
+    task = ensure_registered(TOY_TASK_ID)
+    env = gym.make(task)
+    overlapped = OverlappedCollector(task)
+    try:
+        overlapped.start_demonstrations(3, seed=11)
+        there = overlapped.finish_demonstrations()
+        here = collect_demos(env, expert_for(task), 3, seed=11)
+    finally:
+        overlapped.close()
+        env.close()
+    assert len(there) == len(here) == 3
+    for a, b in zip(here, there, strict=True):
+        for name in a._fields:
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_a_run_with_a_worker_splits_its_demonstrations_over_distinct_episodes() -> None:
+    """Half the demonstrations come from this process, the rest from the worker, none of them twice."""
+    spec = RunSpec(TOY_TASK_ID, seed=4, demos=5, overlap=True)
+    task = ensure_registered(TOY_TASK_ID)
+    env = gym.make(task)
+    overlapped = OverlappedCollector(task)
+    try:
+        dims = Dims(4, 3, 5)
+        demos = _demonstrations(spec, env, dims, overlapped)
+        serial = _demonstrations(spec, env, dims, SerialCollector(env))
+    finally:
+        overlapped.close()
+        env.close()
+    assert len(demos) == len(serial) == 5
+    for a, b in zip(demos[:2], serial[:2], strict=True):  # this process's half: the serial run's first two
+        np.testing.assert_array_equal(a.obs, b.obs)
+    starts = {tuple(episode.obs[0]) for episode in demos}
+    assert len(starts) == 5
 
 
 def test_an_overlapped_run_trains_and_keeps_a_policy(tmp_path: Path) -> None:
