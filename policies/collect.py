@@ -7,6 +7,7 @@ a worker process (Gymnasium's :class:`~gymnasium.vector.AsyncVectorEnv` with one
 ``step_async``/``step_wait`` pair is exactly "start the physics, do something else, take the result")
 and calls back into the learner between the two, so the updates run while the physics does.
 
+The worker also collects half of the expert's demonstrations while this process collects the other half.
 The worker's environment returns no ``info``: training reads observations, goals and the end of the
 episode only, and the info dict (tens of entries) would cost a pickle per step. Episodes are seeded as
 the serial loop seeds them; what differs is only that an episode's updates see the buffer as it was when
@@ -22,16 +23,27 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.vector.async_vector_env import _async_worker
 
 from policies.buffers import Episode
+from policies.demos import collect_demos, expert_for
 
 __all__ = ["Collector", "OverlappedCollector", "SerialCollector", "can_run_in_worker"]
 
 Observation = dict[str, np.ndarray]
 
 
-class _WithoutInfo(gym.Wrapper[Any, Any, Any, Any]):
-    """The task with empty info dicts (training does not read them)."""
+class _WorkerTask(gym.Wrapper[Any, Any, Any, Any]):
+    """The task as the worker runs it: empty info dicts (training does not read them), and the task's
+    expert demonstrations on request."""
+
+    def __init__(self, env: gym.Env[Any, Any], task_id: str) -> None:
+        super().__init__(env)
+        self.task_id = task_id
+
+    def demonstrations(self, count: int, seed: int) -> list[Episode]:
+        """``count`` successful expert episodes seeded from ``seed`` (:func:`policies.demos.collect_demos`)."""
+        return collect_demos(self.env, expert_for(self.task_id), count, seed)
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         observation, _ = self.env.reset(**kwargs)
@@ -40,6 +52,19 @@ class _WithoutInfo(gym.Wrapper[Any, Any, Any, Any]):
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, _ = self.env.step(action)
         return observation, reward, terminated, truncated, {}
+
+
+def _worker_ending_quietly(*args: Any) -> None:
+    """Gymnasium's worker loop, ending without a traceback when this process's parent is gone.
+
+    A parent killed outright (SIGKILL, the OOM killer) closes its end of the pipe: Gymnasium's worker
+    then fails to read a command (EOFError), tries to report it on the same pipe (BrokenPipeError) and
+    dies printing both tracebacks into the user's terminal. The worker has nothing to save, so it ends.
+    """
+    try:
+        _async_worker(*args)
+    except (EOFError, BrokenPipeError, ConnectionResetError):
+        return
 
 
 class _TaskFactory:
@@ -53,7 +78,7 @@ class _TaskFactory:
         from policies.trainer import ensure_registered  # the worker's own registry: sim's tasks
 
         env = gym.make(ensure_registered(self.task_id))
-        return _WithoutInfo(self.wrapper(env) if self.wrapper is not None else env)
+        return _WorkerTask(self.wrapper(env) if self.wrapper is not None else env, self.task_id)
 
 
 def can_run_in_worker(wrapper: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None) -> bool:
@@ -151,7 +176,9 @@ class OverlappedCollector(Collector):
 
     def __init__(self, task_id: str, wrapper: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None) -> None:
         # spawn, not fork: the parent has torch's and PyBullet's threads and state, which fork copies badly.
-        self._envs = gym.vector.AsyncVectorEnv([_TaskFactory(task_id, wrapper)], context="spawn")
+        self._envs = gym.vector.AsyncVectorEnv(
+            [_TaskFactory(task_id, wrapper)], context="spawn", worker=_worker_ending_quietly
+        )
 
     def _start_reset(self, seed: int) -> None:
         self._envs.reset_async(seed=[seed])
@@ -166,6 +193,19 @@ class OverlappedCollector(Collector):
     def _finish_step(self) -> tuple[Observation, bool, bool]:
         batch, _, terminated, truncated, _ = self._envs.step_wait()
         return _first(batch), bool(terminated[0]), bool(truncated[0])
+
+    def start_demonstrations(self, count: int, seed: int) -> None:
+        """Start collecting ``count`` expert demonstrations in the worker, seeded from ``seed``."""
+        self._envs.call_async("demonstrations", count, seed)
+
+    def finish_demonstrations(self) -> list[Episode]:
+        """The demonstrations :meth:`start_demonstrations` asked for, once the worker has them.
+
+        Raises:
+            DemonstrationError: The expert did not succeed often enough in the worker.
+        """
+        (episodes,) = self._envs.call_wait()
+        return list(episodes)
 
     def close(self) -> None:
         """Stop the worker."""

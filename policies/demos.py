@@ -33,7 +33,7 @@ from psm_control.errors import InputFileError
 from psm_control.inputs import check_regular_file
 from sim.expert import ScriptedExpert
 
-__all__ = ["Controller", "ExpertFactory", "collect_demos", "expert_for", "load_demos", "rollout"]
+__all__ = ["Controller", "ExpertFactory", "collect_demos", "default_attempts", "expert_for", "load_demos", "rollout"]
 
 
 class Controller(Protocol):
@@ -105,6 +105,11 @@ def expert_for(task_id: str) -> ExpertFactory:
     )
 
 
+def default_attempts(count: int) -> int:
+    """Episodes :func:`collect_demos` tries for ``count`` successful ones unless told otherwise."""
+    return 3 * count + 10
+
+
 def collect_demos(
     env: gym.Env[Any, Any], expert: ExpertFactory, count: int, seed: int, max_attempts: int | None = None
 ) -> list[Episode]:
@@ -113,7 +118,7 @@ def collect_demos(
     Raises:
         DemonstrationError: The expert did not succeed ``count`` times within ``max_attempts`` episodes.
     """
-    attempts = max_attempts if max_attempts is not None else 3 * count + 10
+    attempts = max_attempts if max_attempts is not None else default_attempts(count)
     controller = expert(env)
     episodes: list[Episode] = []
     for i in range(attempts):

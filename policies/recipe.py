@@ -9,9 +9,14 @@ recipe aims at a competent policy in as little wall time as a 2-core machine all
   weight (5) let the actor's Q term undo the cloned policy within tens of episodes (Target, from 30
   demonstrations: 65 % held-out after cloning, 0 % 44 episodes later).
 - No uniformly random steps: the cloned policy plus exploration noise explores where it matters.
-- Collection in a worker process, the updates running while the task simulates (:mod:`policies.collect`).
-- Early stopping on held-out success: small evaluations often, the run ends at the first that reaches
-  :attr:`Recipe.stop_at_success`, and that evaluation's policy is ``policy.safetensors``.
+- Collection in a worker process, the updates running while the task simulates, and half of the
+  demonstrations collected there while this process collects the other half (:mod:`policies.collect`).
+- Early stopping on held-out success: an evaluation after cloning, then one every 50 episodes (an
+  evaluation of 100 episodes simulates twice what 50 training episodes do); the run ends at the first
+  that reaches :attr:`Recipe.stop_at_success`, and that evaluation's policy is ``policy.safetensors``. The bar is
+  97 % of 100 held-out episodes: at 96 % of 50 a Lift policy passed 48 of its 50 and scored 93 % on
+  100 unseen ones (``bench train``, seed 2). A policy that succeeds 93 % of the time passes 48 of 50
+  with probability 0.31, 97 of 100 with 0.07 (binomial).
 
 Each field can still be overridden on the command line (``--demos``, ``--episodes``, ``--eval-every``,
 ``--eval-episodes``, ``--set FIELD=VALUE``).
@@ -57,7 +62,7 @@ DEFAULT_RECIPE = Recipe(
     config=TrainConfig(algo="col", bc_pretrain_steps=3_000, bc_weight=50.0, random_steps=0, updates_per_episode=50),
     demos=200,
     episodes=2_000,
-    eval_every=10,
-    eval_episodes=50,
-    stop_at_success=0.96,
+    eval_every=50,
+    eval_episodes=100,
+    stop_at_success=0.97,
 )

@@ -46,7 +46,7 @@ from policies.checkpoint import (
 )
 from policies.collect import Collector, OverlappedCollector, SerialCollector, can_run_in_worker
 from policies.config import TrainConfig
-from policies.demos import collect_demos, expert_for, load_demos, rollout
+from policies.demos import collect_demos, default_attempts, expert_for, load_demos, rollout
 from policies.errors import CheckpointError, TrainingDivergedError
 from psm_control.errors import ConfigurationError, UnknownVariantError
 
@@ -200,12 +200,20 @@ def evaluate(agent: Agent, env: gym.Env[Any, Any], episodes: int) -> float:
     return successes / episodes
 
 
-def _demonstrations(spec: RunSpec, env: gym.Env[Any, Any], dims: Dims) -> list[Episode]:
+def _demonstrations(spec: RunSpec, env: gym.Env[Any, Any], dims: Dims, collector: Collector) -> list[Episode]:
+    """The run's demonstrations: from its file, or from the task's expert (half of them in the collecting
+    worker, if there is one, seeded after every seed the other half may try)."""
     if spec.demos == 0:
         return []
     if spec.demos_file is not None:
         return load_demos(spec.demos_file, spec.demos, dims=(dims.obs, dims.goal, dims.action))
-    return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=_DEMO_SEED + 1000 * spec.seed)
+    seed = _DEMO_SEED + 1000 * spec.seed
+    if not isinstance(collector, OverlappedCollector) or spec.demos < 2:
+        return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=seed)
+    here = spec.demos // 2
+    collector.start_demonstrations(spec.demos - here, seed + default_attempts(here))
+    episodes = collect_demos(env, expert_for(spec.task_id), here, seed=seed)
+    return episodes + collector.finish_demonstrations()
 
 
 #: Kept free at the end of a budget [s]: closing the environments and the interpreter's exit with torch,
@@ -318,7 +326,7 @@ def _train(
 
     buffer = EpisodeBuffer(config.buffer_size, horizon, dims.obs, dims.goal, dims.action)
     demo_start = time.monotonic()
-    demos = _demonstrations(spec, env, dims) if config.uses_demos else []
+    demos = _demonstrations(spec, env, dims, collector) if config.uses_demos else []
     demo_buffer = None
     if demos:
         demo_buffer = EpisodeBuffer(len(demos) * horizon, horizon, dims.obs, dims.goal, dims.action)
