@@ -13,12 +13,12 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from crtk_msgs.msg import OperatingState, StringStamped  # type: ignore[import-untyped]
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
@@ -28,6 +28,7 @@ from hardware_if import convert
 from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
+from hardware_if.executor import make_executor
 from hardware_if.session import stop_spin_thread
 from hardware_if.task_estimate import JawReading
 from psm_control.commands import JointCommand, MeasuredState
@@ -100,7 +101,7 @@ class PsmClient(Node):
         self._commanding = False
         self._hold_q: np.ndarray | None = None
         self._errors: list[str] = []
-        self._executor: SingleThreadedExecutor | None = None
+        self._executor: Any = None
         self._thread: threading.Thread | None = None
         self._running = False
 
@@ -132,7 +133,7 @@ class PsmClient(Node):
     def start(self) -> PsmClient:
         """Spin the node on a background thread."""
         if self._thread is None:
-            self._executor = SingleThreadedExecutor(context=self.context)
+            self._executor = make_executor(self.context)
             self._executor.add_node(self)
             self._running = True
             self._thread = threading.Thread(target=self._spin, name=f"{self.topics.arm}-client", daemon=True)
