@@ -3,10 +3,12 @@
 :class:`SimulatedPsm` serves everything the dVRK's own Python client (``dvrk.psm``) connects to, so its
 ``check_connections()`` passes and its scripts run unmodified:
 
-- State, every period (100 Hz by default): ``measured_js`` (with joint efforts), ``setpoint_js``,
-  ``measured_cp``/``setpoint_cp`` and their ``local/`` versions, ``measured_cv``, ``local/measured_cv``,
-  ``body/`` and ``spatial/measured_cf``, ``body/`` and ``spatial/jacobian``, ``jaw/measured_js`` and
-  ``jaw/setpoint_js``.
+- State, every period (100 Hz by default; the dVRK's ROS bridge publishes at one such rate too):
+  ``measured_js`` (with joint efforts), ``setpoint_js``, ``measured_cp``/``setpoint_cp`` and their
+  ``local/`` versions, ``measured_cv``, ``local/measured_cv``, ``body/`` and ``spatial/measured_cf``,
+  ``body/`` and ``spatial/jacobian``, ``jaw/measured_js`` and ``jaw/setpoint_js``. Only topics with a
+  subscriber are computed and sent. The kinematic arm answers a ``servo_jp``/``servo_jr`` at once on
+  ``measured_js`` and ``setpoint_js``; a tick after such an answer does not send those two again.
 - Events (transient-local): ``operating_state`` (on every change and every accepted ``move_*``, and
   republished every :data:`OPERATING_STATE_REPUBLISH_S` for clients that subscribe without history),
   ``goal_reached``, ``trajectory_j/ratio``, ``error``, ``warning``, ``status``.
