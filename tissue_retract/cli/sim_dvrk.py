@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import signal
+import threading
 
 import numpy as np
 
@@ -129,7 +130,11 @@ def run(args: argparse.Namespace) -> int:
             node.get_logger().info(
                 f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
             )
-            while node.context.ok():  # spin_once: see hardware_if.executor
+            # From here Ctrl-C asks the loop to end: a KeyboardInterrupt raised in a callback that the C++
+            # events executor runs is logged as a fatal callback error on its way out.
+            stop = threading.Event()
+            signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
+            while node.context.ok() and not stop.is_set():  # spin_once: see hardware_if.executor
                 executor.spin_once(timeout_sec=0.05)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
