@@ -7,6 +7,8 @@ homogeneous transforms [m]; ROS quaternions are (x, y, z, w).
 
 from __future__ import annotations
 
+import array
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -34,7 +36,7 @@ __all__ = [
 
 def seconds_to_time(stamp_s: float) -> Time:
     """A ``builtin_interfaces/Time`` from seconds."""
-    sec = int(np.floor(stamp_s))
+    sec = math.floor(stamp_s)
     return Time(sec=sec, nanosec=min(round((stamp_s - sec) * 1e9), 999_999_999))
 
 
@@ -54,10 +56,20 @@ def joint_state(
     message = JointState()
     message.header.stamp = seconds_to_time(stamp_s)
     message.name = list(names)
-    message.position = [float(v) for v in position]
-    message.velocity = [] if velocity is None else [float(v) for v in velocity]
-    message.effort = [] if effort is None else [float(v) for v in effort]
+    message.position = _doubles(position, "position")
+    if velocity is not None:
+        message.velocity = _doubles(velocity, "velocity")
+    if effort is not None:
+        message.effort = _doubles(effort, "effort")
     return message
+
+
+def _doubles(values: Sequence[float] | np.ndarray, what: str) -> array.array[float]:
+    """A ``float64[]`` field's value: the message keeps an ``array.array('d')`` as it is, without a copy."""
+    vector = np.asarray(values, dtype=float)
+    if vector.ndim != 1:
+        raise JointVectorError(f"JointState {what} must be a vector, got shape {vector.shape}")
+    return array.array("d", vector.tobytes())
 
 
 def _field(message: JointState, values: Sequence[float], names: Sequence[str], what: str) -> np.ndarray:
@@ -93,11 +105,11 @@ def joint_state_velocities(message: JointState, names: Sequence[str] = JOINT_NAM
 
 def quaternion_to_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
     """3x3 rotation matrix of a (normalised here) quaternion."""
-    q = np.array([x, y, z, w], dtype=float)
-    norm = np.linalg.norm(q)
-    if not np.isfinite(norm) or norm < 1e-12:
-        raise JointVectorError(f"quaternion {q.tolist()} has no orientation")
-    x, y, z, w = q / norm
+    x, y, z, w = float(x), float(y), float(z), float(w)
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not math.isfinite(norm) or norm < 1e-12:
+        raise JointVectorError(f"quaternion {[x, y, z, w]} has no orientation")
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -109,25 +121,25 @@ def quaternion_to_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
 
 def matrix_to_quaternion(rotation: np.ndarray) -> tuple[float, float, float, float]:
     """Quaternion (x, y, z, w), w >= 0, of a 3x3 rotation matrix."""
-    R = np.asarray(rotation, dtype=float)
-    trace = R[0, 0] + R[1, 1] + R[2, 2]
+    # Plain floats: numpy's per-element overhead made this most of a pose message's cost.
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(rotation, dtype=float)[:3, :3].tolist()
+    trace = r00 + r11 + r22
     if trace > 0.0:
-        s = 2.0 * np.sqrt(trace + 1.0)
-        q = ((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s)
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = (0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s)
-    elif R[1, 1] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q = ((R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s)
+        s = 2.0 * math.sqrt(trace + 1.0)
+        x, y, z, w = (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s, 0.25 * s
+    elif r00 > r11 and r00 > r22:
+        s = 2.0 * math.sqrt(1.0 + r00 - r11 - r22)
+        x, y, z, w = 0.25 * s, (r01 + r10) / s, (r02 + r20) / s, (r21 - r12) / s
+    elif r11 > r22:
+        s = 2.0 * math.sqrt(1.0 + r11 - r00 - r22)
+        x, y, z, w = (r01 + r10) / s, 0.25 * s, (r12 + r21) / s, (r02 - r20) / s
     else:
-        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q = ((R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s)
-    quaternion = np.array(q) / np.linalg.norm(q)
-    if quaternion[3] < 0.0:
-        quaternion = -quaternion
-    x, y, z, w = (float(v) for v in quaternion)
-    return x, y, z, w
+        s = 2.0 * math.sqrt(1.0 + r22 - r00 - r11)
+        x, y, z, w = (r02 + r20) / s, (r12 + r21) / s, 0.25 * s, (r10 - r01) / s
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if w < 0.0:
+        norm = -norm
+    return x / norm, y / norm, z / norm, w / norm
 
 
 def pose_stamped(transform: np.ndarray, frame_id: str, stamp_s: float = 0.0) -> PoseStamped:
@@ -136,7 +148,7 @@ def pose_stamped(transform: np.ndarray, frame_id: str, stamp_s: float = 0.0) -> 
     message = PoseStamped()
     message.header.stamp = seconds_to_time(stamp_s)
     message.header.frame_id = frame_id
-    message.pose.position.x, message.pose.position.y, message.pose.position.z = (float(v) for v in T[:3, 3])
+    message.pose.position.x, message.pose.position.y, message.pose.position.z = T[:3, 3].tolist()
     o = message.pose.orientation
     o.x, o.y, o.z, o.w = matrix_to_quaternion(T[:3, :3])
     return message
@@ -159,10 +171,10 @@ def wrench_stamped(
     message.header.stamp = seconds_to_time(stamp_s)
     message.header.frame_id = frame_id
     f = message.wrench.force
-    f.x, f.y, f.z = (float(v) for v in force_n)
+    f.x, f.y, f.z = np.asarray(force_n, dtype=float).tolist()
     if torque_nm is not None:
         t = message.wrench.torque
-        t.x, t.y, t.z = (float(v) for v in torque_nm)
+        t.x, t.y, t.z = np.asarray(torque_nm, dtype=float).tolist()
     return message
 
 

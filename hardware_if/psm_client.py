@@ -10,15 +10,16 @@ re-sending the arm's current set-point, logs the reason once, and reports it in 
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from crtk_msgs.msg import OperatingState, StringStamped  # type: ignore[import-untyped]
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
@@ -28,6 +29,7 @@ from hardware_if import convert
 from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
+from hardware_if.executor import make_executor
 from hardware_if.session import stop_spin_thread
 from hardware_if.task_estimate import JawReading
 from psm_control.commands import JointCommand, MeasuredState
@@ -100,7 +102,7 @@ class PsmClient(Node):
         self._commanding = False
         self._hold_q: np.ndarray | None = None
         self._errors: list[str] = []
-        self._executor: SingleThreadedExecutor | None = None
+        self._executor: Any = None
         self._thread: threading.Thread | None = None
         self._running = False
 
@@ -132,7 +134,7 @@ class PsmClient(Node):
     def start(self) -> PsmClient:
         """Spin the node on a background thread."""
         if self._thread is None:
-            self._executor = SingleThreadedExecutor(context=self.context)
+            self._executor = make_executor(self.context)
             self._executor.add_node(self)
             self._running = True
             self._thread = threading.Thread(target=self._spin, name=f"{self.topics.arm}-client", daemon=True)
@@ -183,10 +185,11 @@ class PsmClient(Node):
             with self._lock:
                 self._invalid(topic, str(e))
             return None
-        bad = [names[i] for i in np.flatnonzero(~np.isfinite(q))]
-        if not bad and not np.all(np.isfinite(np.asarray(message.velocity, dtype=float))):
+        # math.isfinite over the few values: numpy's per-call overhead was most of a callback's time.
+        bad = [name for name, value in zip(names, q.tolist(), strict=True) if not math.isfinite(value)]
+        if not bad and not all(map(math.isfinite, message.velocity)):
             bad = ["velocity"]
-        if not bad and not np.all(np.isfinite(np.asarray(message.effort, dtype=float))):
+        if not bad and not all(map(math.isfinite, message.effort)):
             bad = ["effort"]
         if bad:
             with self._lock:
@@ -228,10 +231,11 @@ class PsmClient(Node):
             self._setpoint_jaw = float(q[0])
 
     def _on_wrench(self, message: WrenchStamped) -> None:
+        f, t = message.wrench.force, message.wrench.torque
+        finite = all(map(math.isfinite, (f.x, f.y, f.z, t.x, t.y, t.z)))
         force = convert.wrench_force(message)
-        t = message.wrench.torque
         with self._lock:
-            if not (np.all(np.isfinite(force)) and np.all(np.isfinite([t.x, t.y, t.z]))):
+            if not finite:
                 self._invalid("body/measured_cf", "non-finite force or torque (finite numbers only)")
                 return
             self._force_body_n = force
@@ -240,7 +244,7 @@ class PsmClient(Node):
         def callback(message: PoseStamped) -> None:
             p = message.pose.position
             try:
-                if not np.all(np.isfinite([p.x, p.y, p.z])):
+                if not all(map(math.isfinite, (p.x, p.y, p.z))):
                     raise ValueError("non-finite position (finite numbers only)")
                 pose = convert.pose_matrix(message)
             except (TissueRetractError, ValueError) as e:

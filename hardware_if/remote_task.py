@@ -24,13 +24,13 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 from geometry_msgs.msg import PointStamped  # type: ignore[import-untyped]
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import Bool, Int64  # type: ignore[import-untyped]
 
 import sim.envs
 from hardware_if.crtk import periodic_qos
 from hardware_if.errors import DvrkTimeoutError
+from hardware_if.executor import make_executor
 from hardware_if.psm_client import PsmClient
 from hardware_if.registration import console_base_frame, grasp_point
 from hardware_if.session import stop_spin_thread
@@ -66,7 +66,7 @@ class TaskListener(Node):
         self._resets_rx_s = float("-inf")
         self.create_subscription(Int64, task_topic(arm, "resets"), self._on_resets, qos)
         self._reset = None if listen_only else self.create_publisher(Int64, task_topic(arm, "reset"), qos)
-        self._executor = SingleThreadedExecutor(context=self.context)
+        self._executor = make_executor(self.context)
         self._executor.add_node(self)
         self._running = True
         self._thread = threading.Thread(target=self._spin, name=f"{arm}-task", daemon=True)

@@ -3,10 +3,12 @@
 :class:`SimulatedPsm` serves everything the dVRK's own Python client (``dvrk.psm``) connects to, so its
 ``check_connections()`` passes and its scripts run unmodified:
 
-- State, every period (100 Hz by default): ``measured_js`` (with joint efforts), ``setpoint_js``,
-  ``measured_cp``/``setpoint_cp`` and their ``local/`` versions, ``measured_cv``, ``local/measured_cv``,
-  ``body/`` and ``spatial/measured_cf``, ``body/`` and ``spatial/jacobian``, ``jaw/measured_js`` and
-  ``jaw/setpoint_js``.
+- State, every period (100 Hz by default; the dVRK's ROS bridge publishes at one such rate too):
+  ``measured_js`` (with joint efforts), ``setpoint_js``, ``measured_cp``/``setpoint_cp`` and their
+  ``local/`` versions, ``measured_cv``, ``local/measured_cv``, ``body/`` and ``spatial/measured_cf``,
+  ``body/`` and ``spatial/jacobian``, ``jaw/measured_js`` and ``jaw/setpoint_js``. Only topics with a
+  subscriber are computed and sent. The kinematic arm answers a ``servo_jp``/``servo_jr`` at once on
+  ``measured_js`` and ``setpoint_js``; a tick after such an answer does not send those two again.
 - Events (transient-local): ``operating_state`` (on every change and every accepted ``move_*``, and
   republished every :data:`OPERATING_STATE_REPUBLISH_S` for clients that subscribe without history),
   ``goal_reached``, ``trajectory_j/ratio``, ``error``, ``warning``, ``status``.
@@ -140,7 +142,7 @@ class SimulatedPsm(Node):
         self.settings = {"use_gravity_compensation": True, "body/set_cf_orientation_absolute": False}
         self._sample: ArmSample = self.arm_model.reset(self._setpoint_q, self._setpoint_jaw)
         self._last_tick_s = time.monotonic()
-        self._joints_published_s = float("-inf")
+        self._answered = False  # a servo command's measured_js and setpoint_js went out since the last tick
 
         state, event = periodic_qos(), event_qos()
         t = self.topics.topic
@@ -204,8 +206,7 @@ class SimulatedPsm(Node):
     def _on_state_command(self, message: StringStamped) -> None:
         # A client that just connected may read the arm's state as soon as enable/home return (the dVRK's
         # scripts do, and an idempotent home returns at once): send it now, before the operating state.
-        self._publish_joints()
-        self._publish_poses_and_force()
+        self._publish_state(joints=True)
         command = message.string
         if command == "enable":
             if self.state.state == "FAULT":
@@ -322,9 +323,10 @@ class SimulatedPsm(Node):
         self._end_trajectories(arm=True, jaw=False)
         self._servo(q, self._setpoint_jaw)
         if self.arm_model.instantaneous:
-            # The kinematic arm is already there: answer with the new state now, not a period later.
+            # The kinematic arm is already there: answer with the arm's new joints now, not a period later.
             self._sample = self.arm_model.step(0.0)
-            self._publish_joints()
+            self._publish_arm_joints()
+            self._answered = True
 
     def _on_jaw_servo_jp(self, message: JointState) -> None:
         if not self._ready("jaw/servo_jp"):
@@ -552,6 +554,7 @@ class SimulatedPsm(Node):
         now = time.monotonic()
         dt = now - self._last_tick_s
         self._last_tick_s = now
+        answered, self._answered = self._answered, False
         if self._homing and self._homing_moves_at_s is not None and now >= self._homing_moves_at_s:
             self._homing_moves_at_s = None
             self._trajectory = self._plan(self.home_q)
@@ -573,9 +576,9 @@ class SimulatedPsm(Node):
         self._sample = self.arm_model.step(dt)
         if self._mode == "free":
             self._servo(self._sample.q, self._sample.jaw)  # nothing holds the arm: the set-point follows it
-        if now - self._joints_published_s >= 0.5 * self.period_s:
-            self._publish_joints()
-        self._publish_poses_and_force()
+        # A servo command answered since the last tick already sent measured_js and setpoint_js: a stream
+        # of commands at the rate or faster is answered once per command, not once more per tick.
+        self._publish_state(joints=not answered)
         if self.scene is not None:
             self.scene.scene.base_frame = self.configuration.base_frame
             markers = self.arm_model.scene_markers()
@@ -618,50 +621,113 @@ class SimulatedPsm(Node):
     def _stamp(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
 
-    def _publish_joints(self) -> None:
-        self._joints_published_s = time.monotonic()
-        stamp, sample = self._stamp(), self._sample
-        # Joint efforts: what the motors exert against the force on the tool (J^T f), plus a commanded
-        # effort in effort mode. The dVRK estimates measured_cf from these efforts the other way round.
-        self.configuration.update(sample.q, sample.jaw)
-        effort = self.configuration.base_jacobian()[:3].T @ sample.force_n
-        if self._mode == "effort":
-            effort = effort + self._setpoint_effort
-        self._pub["measured_js"].publish(convert.joint_state(JOINT_NAMES, sample.q, sample.qd, effort, stamp_s=stamp))
-        self._pub["setpoint_js"].publish(
-            convert.joint_state(JOINT_NAMES, self._setpoint_q, effort=self._setpoint_effort, stamp_s=stamp)
-        )
-        self._pub["jaw/measured_js"].publish(
-            convert.joint_state(
-                (JAW_JOINT_NAME,), [sample.jaw], [sample.jaw_velocity], [sample.jaw_effort], stamp_s=stamp
-            )
-        )
-        self._pub["jaw/setpoint_js"].publish(
-            convert.joint_state((JAW_JOINT_NAME,), [self._setpoint_jaw], stamp_s=stamp)
-        )
+    def _kinematics_at(self, q: np.ndarray, jaw: float) -> None:
+        """Bring :attr:`configuration` to ``q`` and ``jaw``, unless it is there (the set-point often is)."""
+        if jaw != self.configuration.jaw or not np.array_equal(q, self.configuration.q):
+            self.configuration.update(q, jaw)
 
-    def _publish_poses_and_force(self) -> None:
-        stamp, sample = self._stamp(), self._sample
+    def _subscribed(self, name: str) -> bool:
+        """Whether any subscriber is matched on a state topic: a message for nobody is neither built nor sent.
+
+        At 1 kHz, building and publishing the 14 state topics took most of the console's time, and a client
+        typically reads half of them. A subscriber that connects gets the next period's message.
+        """
+        return bool(self._pub[name].get_subscription_count() > 0)
+
+    def _publish_state(self, *, joints: bool) -> None:
+        """One period's state topics; the arm's ``measured_js``/``setpoint_js`` only with ``joints``."""
+        stamp = self._stamp()
+        if joints:
+            self._publish_arm_joints(stamp)
+        self._publish_jaw(stamp)
+        self._publish_poses_and_force(stamp)
+
+    def _publish_arm_joints(self, stamp: float | None = None) -> None:
+        stamp, sample = self._stamp() if stamp is None else stamp, self._sample
+        if self._subscribed("measured_js"):
+            # Joint efforts: what the motors exert against the force on the tool (J^T f), plus a commanded
+            # effort in effort mode. The dVRK estimates measured_cf from these efforts the other way round.
+            self._kinematics_at(sample.q, sample.jaw)
+            effort = self.configuration.base_jacobian()[:3].T @ sample.force_n
+            if self._mode == "effort":
+                effort = effort + self._setpoint_effort
+            self._pub["measured_js"].publish(
+                convert.joint_state(JOINT_NAMES, sample.q, sample.qd, effort, stamp_s=stamp)
+            )
+        if self._subscribed("setpoint_js"):
+            self._pub["setpoint_js"].publish(
+                convert.joint_state(JOINT_NAMES, self._setpoint_q, effort=self._setpoint_effort, stamp_s=stamp)
+            )
+
+    def _publish_jaw(self, stamp: float) -> None:
+        sample = self._sample
+        if self._subscribed("jaw/measured_js"):
+            self._pub["jaw/measured_js"].publish(
+                convert.joint_state(
+                    (JAW_JOINT_NAME,), [sample.jaw], [sample.jaw_velocity], [sample.jaw_effort], stamp_s=stamp
+                )
+            )
+        if self._subscribed("jaw/setpoint_js"):
+            self._pub["jaw/setpoint_js"].publish(
+                convert.joint_state((JAW_JOINT_NAME,), [self._setpoint_jaw], stamp_s=stamp)
+            )
+
+    def _publish_poses_and_force(self, stamp: float) -> None:
+        sample = self._sample
         base_id, local_id = self.topics.base_frame_id, self.topics.local_frame_id
-        for prefix, q in (("setpoint", self._setpoint_q), ("measured", sample.q)):
-            self.configuration.update(q, sample.jaw)
-            local = self.configuration.local_pose()
-            self._pub[f"local/{prefix}_cp"].publish(convert.pose_stamped(local, local_id, stamp))
-            self._pub[f"{prefix}_cp"].publish(convert.pose_stamped(self.configuration.measured_pose(), base_id, stamp))
-        # The configuration is now at the measured joints.
+        wanted = {name for name in _MEASURED_TOPICS + _SETPOINT_TOPICS if self._subscribed(name)}
+        if wanted & set(_SETPOINT_TOPICS):
+            self._kinematics_at(self._setpoint_q, sample.jaw)
+            self._publish_pose("setpoint", wanted, stamp)
+        if not wanted & set(_MEASURED_TOPICS):
+            return
+        self._kinematics_at(sample.q, sample.jaw)
+        self._publish_pose("measured", wanted, stamp)
         rotation = self.configuration.measured_pose()[:3, :3]
-        spatial = convert.wrench_stamped(sample.force_n, frame_id=base_id, stamp_s=stamp)
-        self._pub["spatial/measured_cf"].publish(spatial)
-        body = convert.wrench_stamped(rotation.T @ sample.force_n, frame_id=f"{self.topics.arm}_tip", stamp_s=stamp)
-        self._pub["body/measured_cf"].publish(body)
+        if "spatial/measured_cf" in wanted:
+            spatial = convert.wrench_stamped(sample.force_n, frame_id=base_id, stamp_s=stamp)
+            self._pub["spatial/measured_cf"].publish(spatial)
+        if "body/measured_cf" in wanted:
+            tip_id = f"{self.topics.arm}_tip"
+            body = convert.wrench_stamped(rotation.T @ sample.force_n, frame_id=tip_id, stamp_s=stamp)
+            self._pub["body/measured_cf"].publish(body)
+        if not wanted & {"spatial/jacobian", "body/jacobian", "measured_cv", "local/measured_cv"}:
+            return
         local_jacobian = self.configuration.local_jacobian()
         spatial_jacobian = self.configuration.base_jacobian()
-        body_jacobian = spatial_jacobian.copy()
-        body_jacobian[:3], body_jacobian[3:] = rotation.T @ spatial_jacobian[:3], rotation.T @ spatial_jacobian[3:]
-        self._pub["spatial/jacobian"].publish(_matrix_message(spatial_jacobian))
-        self._pub["body/jacobian"].publish(_matrix_message(body_jacobian))
-        self._pub["measured_cv"].publish(_twist_stamped(spatial_jacobian @ sample.qd, base_id, stamp))
-        self._pub["local/measured_cv"].publish(_twist_stamped(local_jacobian @ sample.qd, local_id, stamp))
+        if "spatial/jacobian" in wanted:
+            self._pub["spatial/jacobian"].publish(_matrix_message(spatial_jacobian))
+        if "body/jacobian" in wanted:
+            body_jacobian = np.vstack([rotation.T @ spatial_jacobian[:3], rotation.T @ spatial_jacobian[3:]])
+            self._pub["body/jacobian"].publish(_matrix_message(body_jacobian))
+        if "measured_cv" in wanted:
+            self._pub["measured_cv"].publish(_twist_stamped(spatial_jacobian @ sample.qd, base_id, stamp))
+        if "local/measured_cv" in wanted:
+            self._pub["local/measured_cv"].publish(_twist_stamped(local_jacobian @ sample.qd, local_id, stamp))
+
+    def _publish_pose(self, prefix: str, wanted: set[str], stamp: float) -> None:
+        """``<prefix>_cp`` and ``local/<prefix>_cp`` at the configuration's joints, those subscribed."""
+        if f"local/{prefix}_cp" in wanted:
+            local = convert.pose_stamped(self.configuration.local_pose(), self.topics.local_frame_id, stamp)
+            self._pub[f"local/{prefix}_cp"].publish(local)
+        if f"{prefix}_cp" in wanted:
+            pose = convert.pose_stamped(self.configuration.measured_pose(), self.topics.base_frame_id, stamp)
+            self._pub[f"{prefix}_cp"].publish(pose)
+
+
+#: State topics computed at the measured joints.
+_MEASURED_TOPICS = (
+    "measured_cp",
+    "local/measured_cp",
+    "body/measured_cf",
+    "spatial/measured_cf",
+    "body/jacobian",
+    "spatial/jacobian",
+    "measured_cv",
+    "local/measured_cv",
+)
+#: State topics computed at the set-point joints.
+_SETPOINT_TOPICS = ("setpoint_cp", "local/setpoint_cp")
 
 
 def _matrix_message(matrix: np.ndarray) -> Float64MultiArray:

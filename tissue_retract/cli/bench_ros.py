@@ -70,7 +70,7 @@ def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str,
             for k in range(count):
                 target = start + k * period
                 while (now := time.perf_counter()) < target:
-                    time.sleep(min(target - now, 0.0005))
+                    time.sleep(target - now)  # one wake-up per command: the client's thread needs the CPU
                 q = base.copy()
                 q[3] = _ROLL0 + _ROLL_STEP * k
                 sent[k] = time.perf_counter()

@@ -24,9 +24,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import signal
+import threading
 
 import numpy as np
 
+from hardware_if.executor import make_executor
 from hardware_if.network import apply_local_ros_env, environment_domain_id
 from hardware_if.session import require_ros, ros_session
 from hardware_if.sim_task import TaskArm, TaskTopics, TruthLog
@@ -81,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     truth_path = check_output_path(args.truth, "--truth") if args.truth else None
     require_ros()
     # The ros extra, imported after the environment it reads is set.
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
 
     from hardware_if.sim_dvrk import SimulatedPsm
 
@@ -111,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
                 args.arm, rate_hz=args.rate, arm_model=task, base_frame=base_frame, home_q=home_q, scene=scene
             )
             # Made before the start-up line: a Ctrl-C right after it must not land in its constructor.
-            executor = SingleThreadedExecutor()
+            executor = make_executor()
             executor.add_node(node)
             if truth_path is not None and task is not None:
                 truth = TruthLog(node, task, truth_path)
@@ -128,7 +130,12 @@ def run(args: argparse.Namespace) -> int:
             node.get_logger().info(
                 f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
             )
-            executor.spin()
+            # From here Ctrl-C asks the loop to end: a KeyboardInterrupt raised in a callback that the C++
+            # events executor runs is logged as a fatal callback error on its way out.
+            stop = threading.Event()
+            signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
+            while node.context.ok() and not stop.is_set():  # spin_once: see hardware_if.executor
+                executor.spin_once(timeout_sec=0.05)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:
