@@ -621,11 +621,6 @@ class SimulatedPsm(Node):
     def _stamp(self) -> float:
         return float(self.get_clock().now().nanoseconds) * 1e-9
 
-    def _kinematics_at(self, q: np.ndarray, jaw: float) -> None:
-        """Bring :attr:`configuration` to ``q`` and ``jaw``, unless it is there (the set-point often is)."""
-        if jaw != self.configuration.jaw or not np.array_equal(q, self.configuration.q):
-            self.configuration.update(q, jaw)
-
     def _subscribed(self, name: str) -> bool:
         """Whether any subscriber is matched on a state topic: a message for nobody is neither built nor sent.
 
@@ -647,7 +642,7 @@ class SimulatedPsm(Node):
         if self._subscribed("measured_js"):
             # Joint efforts: what the motors exert against the force on the tool (J^T f), plus a commanded
             # effort in effort mode. The dVRK estimates measured_cf from these efforts the other way round.
-            self._kinematics_at(sample.q, sample.jaw)
+            self.configuration.update(sample.q, sample.jaw)
             effort = self.configuration.base_jacobian()[:3].T @ sample.force_n
             if self._mode == "effort":
                 effort = effort + self._setpoint_effort
@@ -677,11 +672,11 @@ class SimulatedPsm(Node):
         base_id, local_id = self.topics.base_frame_id, self.topics.local_frame_id
         wanted = {name for name in _MEASURED_TOPICS + _SETPOINT_TOPICS if self._subscribed(name)}
         if wanted & set(_SETPOINT_TOPICS):
-            self._kinematics_at(self._setpoint_q, sample.jaw)
+            self.configuration.update(self._setpoint_q, sample.jaw)
             self._publish_pose("setpoint", wanted, stamp)
         if not wanted & set(_MEASURED_TOPICS):
             return
-        self._kinematics_at(sample.q, sample.jaw)
+        self.configuration.update(sample.q, sample.jaw)
         self._publish_pose("measured", wanted, stamp)
         rotation = self.configuration.measured_pose()[:3, :3]
         if "spatial/measured_cf" in wanted:
