@@ -81,6 +81,7 @@ def crosscheck_sb3(
     try:  # the dev extra: optional, so imported only for the cross-check
         from stable_baselines3 import DDPG, HerReplayBuffer
         from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+        from stable_baselines3.common.logger import Logger
         from stable_baselines3.common.noise import NormalActionNoise
         from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
     except ImportError as e:
@@ -117,6 +118,9 @@ def crosscheck_sb3(
         seed=seed,
         **sb3_kwargs,
     )
+    # A logger of our own that writes nothing: SB3's default one creates an empty SB3-<time> folder in the
+    # system's temporary directory on every learn() and never removes it.
+    model.set_logger(Logger(folder=None, output_formats=[]))
     start = time.perf_counter()
     model.learn(total_timesteps=episodes * MAX_EPISODE_STEPS, callback=StopTrainingOnMaxEpisodes(episodes, verbose=0))
     train_wall_s = time.perf_counter() - start

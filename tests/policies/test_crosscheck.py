@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -29,9 +30,16 @@ KEYS = {
 }
 
 
-def test_smoke_run_trains_for_the_budget_and_returns_a_scored_result(tmp_path: Path) -> None:
+def test_smoke_run_trains_for_the_budget_and_returns_a_scored_result(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Two episodes train SB3 for 100 env steps, write the model and return a result within its interval."""
+    system_tmp = tmp_path / "system-tmp"
+    system_tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(system_tmp))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
     result = crosscheck_sb3(episodes=2, seed=0, eval_episodes=2, learning_starts=50, gradient_steps=2, out=tmp_path)
+    assert not list(system_tmp.glob("SB3-*"))  # no log folder left in the system's temporary directory
     assert set(result) >= KEYS
     assert result["train_episodes"] == 2 and result["env_steps"] <= 100
     assert result["eval_episodes"] == 2 and 0 <= result["successes"] <= 2
