@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 # A CPU build of torch; an unpinned torch would pull several GB of CUDA packages.
 TORCH_SPEC ?= torch==2.13.0
 
-.PHONY: run test lint install install-dev urdf clean
+.PHONY: run test docs lint install install-dev urdf clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -48,8 +48,16 @@ run: install
 
 # The dVRK's own Python client (crtk, dvrk), run by tests/ros against sim-dvrk, is not part of the
 # package: tests/ros/dvrk_client.py finds it ($DVRK_CLIENT_DIR, else shared/dvrk-client nearby).
-test: install-dev
-	$(BIN)/python -m pytest
+# The documentation site first (strict), then pytest on two workers (pytest-xdist), each with its own ROS
+# domain ids and temporary folders (tests/conftest.py, tests/ros/domains.py); it ends with the ten
+# slowest tests, so a slow newcomer shows.
+PYTEST_WORKERS ?= 2
+test: install-dev docs
+	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadgroup --durations=10
+
+# The documentation site from docs/ into site/, warnings as errors (mkdocs.yml says how to add a page).
+docs: install-dev
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 lint: install-dev
 	$(BIN)/ruff check .
@@ -60,4 +68,4 @@ urdf: install
 	$(BIN)/python -c "from psm_control.urdf import main; main()"
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build site *.egg-info

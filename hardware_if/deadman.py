@@ -33,6 +33,8 @@ class ArmFacts(NamedTuple):
         measured_q: Latest measured joints (6,), or None.
         setpoint_q: Latest ``setpoint_js`` joints (6,), or None.
         data_fault: The first malformed or non-finite message on a subscribed topic ("" if none).
+        conflict: Another commander or console of the arm in the ROS graph ("" if none), as
+            :meth:`hardware_if.commander_watch.CommanderWatch.conflict` words it.
     """
 
     now_s: float
@@ -43,6 +45,7 @@ class ArmFacts(NamedTuple):
     measured_q: np.ndarray | None
     setpoint_q: np.ndarray | None
     data_fault: str = ""
+    conflict: str = ""
 
 
 class DeadmanStatus(NamedTuple):
@@ -93,6 +96,8 @@ class Deadman:
         """The first rule the facts break, or "" when commanding is safe (no latching)."""
         if facts.data_fault:
             return facts.data_fault
+        if facts.conflict:
+            return facts.conflict
         if facts.publishers == 0:
             return "publisher gone: nobody publishes measured_js"
         if facts.publishers > 1:

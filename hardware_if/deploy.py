@@ -17,12 +17,15 @@ One fault path, the same for the simulation, the dVRK and a dry run: a policy th
 ``SystemExit`` included) or returns something other than 5 finite numbers, a policy step slower than its
 budget (default one policy period), malformed or non-finite data on any subscribed topic, an arm not
 ENABLED, homed and idle when an episode starts (waited for up to ``wait_s``), a stale or vanished arm, a
-tracking error (the deadman, :mod:`hardware_if.deadman`), or any other error while the arm is commanded
-all end the same way: nothing new is commanded (the arm keeps the last verified command), the fault is
-recorded as a ``hold`` event with its reason and data, the report says ``HOLD: <reason>`` and the exit
-status is :data:`EXIT_HOLD`. SIGINT, SIGTERM and SIGHUP stop between two control ticks, close the
-recording and exit with 128 + the signal number (130, 143, 129). Every run is recorded
-(:mod:`hardware_if.recording`).
+tracking error (the deadman, :mod:`hardware_if.deadman`), another commander or console of the arm
+(:mod:`hardware_if.commander_watch`, checked before anything reaches a console and while it runs), an arm
+not at the episode's start in a dry run or after the move back, a tracking divergence
+(:mod:`hardware_if.arm_pose`), a recording that cannot be written (:mod:`hardware_if.recording_io`), or
+any other error while the arm is commanded all end the same way: nothing new is commanded (the arm keeps
+the last verified command), the fault is recorded as a ``hold`` event with its reason and data, the report
+says ``HOLD: <reason>`` and the exit status is :data:`EXIT_HOLD`. SIGINT, SIGTERM and SIGHUP stop between
+two control ticks, close the recording and exit with 128 + the signal number (130, 143, 129). Every run is
+recorded (:mod:`hardware_if.recording`).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import dataclasses
+import os
 import signal
 import sys
 import threading
@@ -42,25 +46,42 @@ from typing import Any
 import numpy as np
 
 import sim.envs
+from hardware_if.arm_pose import TrackingWatch, return_to_start, start_offset
+from hardware_if.commander_watch import DISCOVERY_S
+from hardware_if.endoscope_stream import DEFAULT_RIG
 from hardware_if.errors import DvrkError, HoldError
+from hardware_if.perceived_env import camera_task
+from hardware_if.readiness import describe_operating_state, dry_run_wait_hint, is_ready_state
 from hardware_if.recording import Recorder
+from hardware_if.recording_io import RecordingError
+from hardware_if.registration import console_base_frame
+from hardware_if.registration_checks import check_registration
 from hardware_if.session import ros_session
 from hardware_if.task_estimate import TaskEstimate, as_point, format_point
+from hardware_if.wrench_calibration import WrenchCalibration
 from policies.resolve import resolve_policy
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from psm_control.errors import ConfigurationError
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
+from safety.force_bound import sensing_warning
 from safety.force_watch import FORCE_LIMIT_STALL, ForceLimitWatch
 from sim.evaluation import PolicyError, run_episode
+from sim.force_sensing import error_bound_n, sensing_params, with_sensing
+from sim.randomization import DEFAULT_RANGES
 from sim.scene import PhysicsParams
 from sim.scene3d import PsmScene
 from sim.scene_stream import LiveScene, SceneStream, StreamScene
+from sim.success_interval import describe_success
+from sim.tissue import TissueParams
 
 __all__ = ["EXIT_HOLD", "EXIT_INTERRUPTED", "STOP_SIGNALS", "DeployOptions", "DeployReport", "Interrupted", "deploy"]
 
 #: Exit status of a deploy that stopped because the deadman held the arm.
 EXIT_HOLD = 4
+#: Longest wait for the console's first operating_state after its first measured_js [s] (a dVRK publishes
+#: the state on change with history, sim-dvrk also every 0.1 s).
+OPERATING_STATE_WAIT_S = 2.0
 #: Exit status of a deploy stopped with Ctrl-C (SIGINT); SIGTERM gives 143 and SIGHUP 129 (128 + signal).
 EXIT_INTERRUPTED = 130
 #: Signals that stop a deploy between two ticks, as Ctrl-C does.
@@ -143,6 +164,15 @@ class DeployOptions:
             topics. None: the ``/<arm>/task/*`` topics.
         goal: Where the site must go [m] in ``<arm>_base``, with ``site``; None: the task's nominal goal
             about the site (:func:`sim.envs.nominal_goal`).
+        force_sensing: What the simulation's chain and policy sense of the force (sim; :mod:`sim.force_sensing`).
+        force_sensing_error_n: The robot's force-sensing error bound [N] (dVRK); None: the ``dvrk`` model's
+            bound for the console's uncompensated ``measured_cf``.
+        force_sensing_source: What that bound is from, for the run-start warning (dVRK).
+        wrench_calibration: The force-sensing calibration to take the force with (dVRK); None: ``measured_cf``.
+        perception: ``camera[:MODEL]``: the site from the endoscope's images (:mod:`hardware_if.perceived_env`).
+        texture: The flap's texture image file (sim).
+        image_timeout_s: With ``perception`` on a dVRK: endoscope images older than this hold the arm [s].
+        endoscope_rig: With ``perception`` on a dVRK: the stereo rig's name (``/<rig>/left/image_raw`` ...).
     """
 
     policy: str
@@ -160,10 +190,20 @@ class DeployOptions:
     live: int | None = None
     site: tuple[float, float, float] | None = None
     goal: tuple[float, float, float] | None = None
+    force_sensing: str = "ideal"
+    force_sensing_error_n: float | None = None
+    force_sensing_source: str = "dvrk measured_cf, uncompensated"
+    wrench_calibration: WrenchCalibration | None = None
+    perception: str | None = None
+    texture: str | None = None
+    image_timeout_s: float = 0.5
+    endoscope_rig: str = DEFAULT_RIG
 
     def __post_init__(self) -> None:
         if self.site is not None and self.target != "dvrk":
             raise ConfigurationError("site", self.site, "--site with --target dvrk (the simulation sees its tissue)")
+        if self.perception is not None and self.site is not None:
+            raise ConfigurationError("perception", self.perception, "either --perception or --site/--registration")
         if self.goal is not None and self.site is None:
             raise ConfigurationError("goal", self.goal, "--goal with --site (the task topics bring their own goal)")
         if self.site is not None:
@@ -231,7 +271,7 @@ class DeployReport:
             )
         if self.episodes and not self.dry_run:
             successes = sum(bool(e["success"]) for e in self.episodes)
-            out.append(f"  success: {successes}/{len(self.episodes)} episodes")
+            out.append(f"  success: {describe_success(successes, len(self.episodes))}")
         verb = "would have sent" if self.dry_run else "sent"
         out.append(
             f"  commands: {self.commands} computed, {verb} {self.commands_sent if not self.dry_run else self.commands}"
@@ -245,8 +285,10 @@ class DeployReport:
                 f"  FORCE LIMIT {self.force_limit_n:g} N EXCEEDED {self.force_limit_exceeded} x, "
                 f"{self.force_over_limit_s:.2f} s in all (events force_limit_exceeded in the recording)"
             )
-        else:
+        elif self.episodes:
             out.append(f"  force limit {self.force_limit_n:g} N: never exceeded")
+        else:
+            out.append(f"  force limit {self.force_limit_n:g} N: no episode ran")
         if self.force_limit_stalls:
             out.append(
                 f"  the force limit stalled the retraction in {self.force_limit_stalls} episode(s) "
@@ -314,10 +356,24 @@ def _account_excursions(
 def deploy(options: DeployOptions, *, echo: Any = print) -> DeployReport:
     """Run the deploy and record it; ``echo`` shows progress lines (default ``print``).
 
+    A recording that cannot be written (at its start, during the run or at its end) is a hold like any other
+    fault: ``recording failed: <path>: <os error>``, exit 4, recorded if the file still takes it.
+
     Raises:
         ConfigurationError: The policy or task cannot be set up (before the arm is commanded).
     """
     report = DeployReport(options.target, options.dry_run, options.record)
+    report.force_limit_n = (options.safety_config or SafetyConfig()).effective_force_limit_n
+    try:
+        _deploy_recorded(options, report, echo)
+    except RecordingError as e:  # at the recording's start or end; in between it is held where it happens
+        if not report.fault:
+            report.fault = str(e)
+            report.holds += 1
+    return report
+
+
+def _deploy_recorded(options: DeployOptions, report: DeployReport, echo: Any) -> None:
     stopper = _Stopper()
     live_view = contextlib.nullcontext() if options.live is None else LiveScene(port=options.live)
     with live_view as live, stopper.installed(), Recorder(options.record, mirror=live) as recorder:
@@ -354,7 +410,6 @@ def deploy(options: DeployOptions, *, echo: Any = print) -> DeployReport:
             recorder.write("/deploy/report", report.to_dict())
             raise
         recorder.write("/deploy/report", report.to_dict())
-    return report
 
 
 def _hold(report: DeployReport, recorder: Recorder, fault: HoldError) -> None:
@@ -365,6 +420,37 @@ def _hold(report: DeployReport, recorder: Recorder, fault: HoldError) -> None:
     report.fault = str(fault)
     report.holds += 1
     recorder.write("/deploy/event", {"kind": "hold", "text": str(fault), "fault": fault.kind, "data": fault.data})
+
+
+def _to_start(client: Any, start_q: np.ndarray, options: DeployOptions, episode: int, echo: Any) -> None:
+    """Before an episode: the arm at the episode's start, sent back there if it is not (held in a dry run)."""
+    reason = client.wait_ready(options.wait_s)  # where an arm is matters once it is ready to be commanded
+    if reason:
+        fault = _deadman_hold(reason)
+        fault.data.update(episode=episode)
+        raise fault
+    offset = start_offset(client.measure().q, start_q)
+    if not offset:
+        return
+    if options.dry_run:
+        raise HoldError("not at start", f"episode {episode}: {offset} (a dry run moves nothing: move it there first)")
+    _require_exclusive(client, f"episode {episode}: before the move to its start")
+    echo(f"episode {episode}: {offset}; moving the arm back (move_jp)")
+    try:
+        reason = return_to_start(client, start_q, options.wait_s)
+    except DvrkError as e:
+        reason = str(e)
+    if reason:
+        raise HoldError("not at start", f"episode {episode}: {reason}")
+
+
+def _require_exclusive(client: Any, when: str) -> None:
+    """Hold, before anything reaches a console, when another commander or console of the arm is in the graph."""
+    reason = client.exclusive()
+    if reason:
+        fault = _deadman_hold(reason)
+        fault.data.update(checked=when)
+        raise fault
 
 
 def _deadman_hold(reason: str) -> HoldError:
@@ -434,19 +520,33 @@ class _RecordingChain:
         return output
 
 
+def _warn_sensing(config: SafetyConfig, source: str, recorder: Recorder, echo: Any) -> None:
+    """Tell the user, and the recording, when the force limit is below what the sensing resolves."""
+    warning = sensing_warning(config, source)
+    if warning:
+        echo(warning)
+        recorder.write("/deploy/event", {"kind": "force_sensing_warning", "text": warning})
+
+
 def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder, echo: Any, stopper: _Stopper) -> None:
 
-    overrides: dict[str, Any] = {"safety_config": options.safety_config}
+    overrides: dict[str, Any] = {
+        "safety_config": options.safety_config,
+        "force_sensing": options.force_sensing,
+        "tissue": TissueParams(texture_path=options.texture),
+    }
     if options.rate_hz is not None:
         overrides["physics"] = PhysicsParams(control_period_s=1.0 / options.rate_hz)
     # The scene on the recording's wall clock, played at the physics' speed when someone watches live.
-    env = StreamScene(
-        sim.envs.make(options.task, **overrides), [recorder], realtime=recorder.mirror is not None, clock=time.time
-    )
+    task_env = sim.envs.make(options.task, **overrides)
+    if options.perception is not None:
+        task_env = camera_task(task_env, options.perception.partition(":")[2] or None)
+    env = StreamScene(task_env, [recorder], realtime=recorder.mirror is not None, clock=time.time)
     try:
         policy, reset = resolve_policy(options.policy, env)
         env.reset(seed=options.seed)  # builds the chain once; wrap it so every tick is recorded
         unwrapped: Any = env.unwrapped
+        _warn_sensing(unwrapped.safety_config, f"{options.force_sensing} force sensing", recorder, echo)
         unwrapped.controller = _RecordingChain(unwrapped.controller, report, recorder, stopper)
         budget = options.policy_budget_s or unwrapped.config.physics.step_s
         checked = _checked_policy(policy, budget)
@@ -477,7 +577,8 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
             report.force_limit_n = result.force_limit_n
             _account_excursions(report, recorder, result.force_limit_exceeded, episode)
             recorder.write("/deploy/event", {"kind": "episode_end", **entry})
-            echo(f"episode {episode}: success={result.success} peak force {result.peak_force_n:.3f} N")
+            seen = "" if result.site_error_mm is None else f", site seen {result.site_error_mm:.1f} mm off"
+            echo(f"episode {episode}: success={result.success} peak force {result.peak_force_n:.3f} N{seen}")
     finally:
         env.close()
 
@@ -493,30 +594,66 @@ def _deploy_dvrk(
     rate_hz = options.rate_hz if options.rate_hz is not None else 100.0
     base = options.safety_config if options.safety_config is not None else SafetyConfig()
     config = dataclasses.replace(base, control_rate_hz=rate_hz)
+    error_n = options.force_sensing_error_n
+    if error_n is None:
+        error_n = error_bound_n(sensing_params("dvrk"))
+    config = with_sensing(config, error_n, DEFAULT_RANGES)  # the task flap's ranges: the tissue assumed
+    # Said before anything reaches the arm: a limit the robot's force sensing cannot tell.
+    _warn_sensing(config, options.force_sensing_source, recorder, echo)
 
     with ros_session(signal_handlers=False):
-        client = PsmClient(options.arm, deadman_timeout_s=config.deadman_timeout_s, listen_only=options.dry_run)
+        # A name of this process's own: another deploy's nodes are then "another commander", never "us".
+        client = PsmClient(
+            options.arm,
+            deadman_timeout_s=config.deadman_timeout_s,
+            listen_only=options.dry_run,
+            node_name=f"{options.arm.lower()}_deploy_{os.getpid()}",
+        )
+        client.set_wrench_calibration(options.wrench_calibration)
         client.start()
-        listener: TaskListener | RegisteredSite
-        if options.site is not None:
+        listener: Any  # TaskListener, RegisteredSite or CameraSite: the task source interface
+        if options.perception is not None:
+            from hardware_if.camera_site import CameraSite  # rclpy, as above
+            from policies.perception import load_estimator  # torch's network: only where the camera is used
+
+            estimator = load_estimator(options.perception.partition(":")[2] or None)
+            listener = CameraSite(
+                options.task,
+                estimator,
+                client,
+                rig=options.endoscope_rig,
+                wait_s=options.wait_s,
+                stale_after_s=options.image_timeout_s,
+            )
+            echo(f"task state: the site from the endoscope's images on /{listener.rig}/ (no task topics)")
+        elif options.site is not None:
             site = np.asarray(options.site, dtype=float)
             goal = sim.envs.nominal_goal(options.task, site) if options.goal is None else np.asarray(options.goal)
             listener = RegisteredSite(TaskEstimate(site, goal), client)
             echo(f"task state: registered site {format_point(site)}, goal {format_point(goal)} (no task topics)")
         else:
             listener = TaskListener(options.arm, listen_only=options.dry_run)
+        client.watch_commanders(*([listener.get_fully_qualified_name()] if isinstance(listener, TaskListener) else []))
         try:
             try:
                 client.wait_for_measurement(options.wait_s)
             except DvrkError as e:
                 raise HoldError("not ready", str(e)) from None
-            state, homed, _ = client.operating_state()
-            echo(f"{options.arm}: operating state {state or 'unknown'}, {'homed' if homed else 'not homed'}")
+            client.settle_graph(options.wait_s)  # the other programs on the domain, not only the console
+            _require_exclusive(client, "before the first command")
+            if options.site is not None:
+                _check_registered_site(options, config, client, echo)
+            # The state arrives on its own topic, possibly after the first measured_js: wait for it too.
+            waited_s = min(options.wait_s, OPERATING_STATE_WAIT_S)
+            state, homed, busy = client.wait_for_operating_state(waited_s)
+            echo(f"{options.arm}: operating state {describe_operating_state(state, homed, busy, waited_s)}")
+            if options.dry_run and not is_ready_state(state, homed):
+                echo(dry_run_wait_hint(options.arm, state, homed, options.wait_s))
             view = RemoteTask(options.task, client, listener)
             policy, reset = resolve_policy(options.policy, view)
             budget = options.policy_budget_s or view.config.physics.step_s
             checked = _checked_policy(policy, budget)
-            if not options.dry_run and not (state == "ENABLED" and homed):
+            if not options.dry_run and not is_ready_state(state, homed):
                 echo(f"{options.arm}: enable and home")
                 try:
                     client.enable(options.wait_s)
@@ -526,18 +663,22 @@ def _deploy_dvrk(
             chain = ControlChain(config)
             for episode in range(options.episodes):
                 seed = options.seed + episode
+                _require_exclusive(client, f"episode {episode}: before its first command")
                 if episode > 0 and not options.dry_run:
                     try:
                         client.home(options.wait_s)  # back to the task's start joints
                     except DvrkError as e:
                         raise HoldError("not ready", f"episode {episode}: {e}") from None
+                _to_start(client, view.model.home(), options, episode, echo)
                 if not listener.wait(options.wait_s):
-                    raise HoldError(
-                        "not ready", f"no task topics /{options.arm}/task/site and goal in {options.wait_s:g} s"
-                    )
+                    awaited = f"task topics /{options.arm}/task/site and goal"
+                    if options.perception is not None:
+                        awaited = f"endoscope images on /{listener.rig}/"
+                    raise HoldError("not ready", f"no {awaited} in {options.wait_s:g} s")
                 after = float("-inf")
                 if not options.dry_run and isinstance(listener, TaskListener) and listener.serves_resets():
                     # The simulated dVRK: a new scene, and only task and arm states of that scene from here on.
+                    _require_exclusive(client, f"episode {episode}: before the task reset")
                     try:
                         after = listener.reset_and_wait(seed, options.wait_s)
                     except DvrkError as e:
@@ -545,10 +686,14 @@ def _deploy_dvrk(
                     if not listener.wait(options.wait_s, after_s=after):
                         raise HoldError("not ready", f"no task state after the reset in {options.wait_s:g} s")
                 listener.new_episode()
+                seen = getattr(listener, "seen_site", None)
+                if seen is not None:
+                    echo(f"episode {episode}: site seen at {format_point(seen)}")
                 # The arm must be ENABLED, homed, idle and valid before the first command of an episode.
                 reason = client.wait_ready(options.wait_s, after_s=after)
-                if reason:
-                    fault = _deadman_hold(reason)
+                offset = "" if reason else start_offset(client.measure().q, view.model.home())
+                if reason or offset:
+                    fault = _deadman_hold(reason) if reason else HoldError("not at start", offset)
                     fault.data.update(episode=episode, seed=seed)
                     raise fault
                 echo(f"episode {episode}: started (seed {seed})")
@@ -568,6 +713,22 @@ def _deploy_dvrk(
         finally:
             listener.close()
             client.close()
+
+
+def _check_registered_site(options: DeployOptions, config: SafetyConfig, client: Any, echo: Any) -> None:
+    """Warn about a ``--site``/``--registration`` far from the tissue; hold, before any command, on one unusable."""
+    try:
+        client.next_measurement(float("-inf"), options.wait_s)  # and the poses the base frame comes from
+    except DvrkError as e:
+        raise HoldError("not ready", str(e)) from None
+    site = np.asarray(options.site, dtype=float)
+    findings = check_registration(site, console_base_frame(client), config=config)
+    for finding in findings:
+        if not finding.refuse:
+            echo(f"WARNING: registered site: {finding.text}")
+    refusals = [finding.text for finding in findings if finding.refuse]
+    if refusals:
+        raise HoldError("registered site", "; ".join(refusals), {"site_m": site.tolist()})
 
 
 def _dvrk_episode(
@@ -596,6 +757,8 @@ def _dvrk_episode(
     # The arm as measured and where the chain sends it (in a dry run: where it would), 20 times a second.
     scene = SceneStream(PsmScene(view.model, f"{options.arm}_base", base_frame), [recorder], period_s=0.05)
     chain.reset(measured)
+    tracking = TrackingWatch(chain.config.deadman_timeout_s + 2 * chain.control_period_s)
+    tracking.reset(measured.q, time.monotonic())
     reset()
     recorder.write("/deploy/event", {"kind": "episode_start", "episode": episode, "seed": seed})
     report.force_limit_n = chain.config.effective_force_limit_n
@@ -625,6 +788,7 @@ def _dvrk_episode(
             for _ in range(ticks_per_step):
                 with stopper.tick():
                     measured = client.measure()
+                    diverged = "" if options.dry_run else tracking.check(measured.q)
                     output = chain.tick(measured)
                     force = float(np.linalg.norm(measured.force_n))
                     peak = max(peak, force)
@@ -638,6 +802,7 @@ def _dvrk_episode(
                         report.predicted_peak_force_n = max(report.predicted_peak_force_n, predicted)
                     else:
                         client.servo_jp(output.command)
+                        tracking.commanded(output.command.q, time.monotonic())
                     status = client.status
                     sent = not options.dry_run and not status.holding
                     recorder.write("/deploy/measured", _measured_payload(measured))
@@ -655,6 +820,8 @@ def _dvrk_episode(
                         grasp=scene.scene.grasp_point(measured.q, measured.jaw),
                         force_n=measured.force_n,
                     )
+                if diverged and status.ok:  # nothing more is sent; the cause, once discovery shows it, is named
+                    status = status._replace(ok=False, reason=client.exclusive_within(DISCOVERY_S) or diverged)
                 if not status.ok:  # the dry run holds as the deploy would: it rehearses the real thing
                     fault = _deadman_hold(status.reason)
                     fault.data.update(episode=episode, step=step, measured=_measured_payload(measured))

@@ -26,14 +26,17 @@ from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 from std_msgs.msg import String  # type: ignore[import-untyped]
 
 from hardware_if import convert
+from hardware_if.commander_watch import NAME_WAIT_S, UNNAMED, WATCH_PERIOD_S, CommanderWatch
 from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
 from hardware_if.executor import make_executor
 from hardware_if.session import stop_spin_thread
 from hardware_if.task_estimate import JawReading
+from hardware_if.wrench_calibration import WrenchCalibration
 from psm_control.commands import JointCommand, MeasuredState
 from psm_control.errors import TissueRetractError
+from psm_control.robot import PsmModel
 from safety.config import SafetyConfig
 
 __all__ = ["PsmClient"]
@@ -46,6 +49,8 @@ RESEND_PERIOD_S = 0.5
 HOME_GRACE_S = 1.0
 #: Allowed clock difference between this machine and the arm's when comparing stamps [s].
 CLOCK_SLACK_S = 0.05
+#: The state topic's history (sent at once to a late subscriber) is over when no state came for this [s].
+STATE_HISTORY_QUIET_S = 0.25
 
 
 class PsmClient(Node):
@@ -92,13 +97,22 @@ class PsmClient(Node):
         self._jaw_velocity = 0.0
         self._setpoint_jaw: float | None = None
         self._force_body_n = np.zeros(3)
+        self._calibration: WrenchCalibration | None = None
+        self._calibration_configuration = PsmModel().configuration()
         self._poses: dict[str, np.ndarray] = {}
         self._frame_ids: dict[str, str] = {}
         self._state = OperatingState()
         self._state_received = False
         self._state_count = 0
+        self._state_rx_s = float("-inf")
         self._unsettled_stamp_s = float("-inf")
         self._graph_publishers = -1
+        self._commanders: CommanderWatch | None = None
+        self._conflict = ""
+        self._watch_ticks = 0
+        self._unnamed_since_s = float("inf")
+        self._pending_unnamed = ""
+        self._joined_s = time.monotonic()
         self._commanding = False
         self._hold_q: np.ndarray | None = None
         self._errors: list[str] = []
@@ -262,6 +276,7 @@ class PsmClient(Node):
         with self._lock:
             self._state = message
             self._state_received = True
+            self._state_rx_s = time.monotonic()
             self._state_count += 1
             if message.is_busy or not message.is_homed:
                 self._unsettled_stamp_s = max(self._unsettled_stamp_s, convert.time_to_seconds(message.header.stamp))
@@ -277,10 +292,77 @@ class PsmClient(Node):
             publishers = self.count_publishers(self.topics.topic("measured_js"))
         except Exception:  # the graph is unavailable while shutting down
             return
+        self._watch_ticks += 1
+        conflict = None
+        if self._commanders is not None and self._watch_ticks % round(WATCH_PERIOD_S / WATCHDOG_PERIOD_S) == 0:
+            conflict = self._unnamed_conflict(self._commanders.conflict())
         with self._lock:
             self._graph_publishers = publishers
+            if conflict is not None and conflict != self._conflict:
+                self._conflict = conflict
+                if conflict:
+                    self.get_logger().error(f"{self.topics.arm}: {conflict}")
+                self._lock.notify_all()
             if self._commanding:
                 self._apply_deadman()
+
+    # -- one commander ----------------------------------------------------------------------------
+    def _unnamed_conflict(self, raw: str) -> str | None:
+        """The conflict to act on: one whose node has no name yet waits up to NAME_WAIT_S for it (None).
+
+        A node that leaves before its name arrives was still another commander: its unnamed conflict stands.
+        """
+        now = time.monotonic()
+        if UNNAMED in raw:
+            if not self._pending_unnamed:
+                self._unnamed_since_s = now
+            self._pending_unnamed = raw
+            return raw if now - self._unnamed_since_s >= NAME_WAIT_S else None
+        conflict, self._pending_unnamed = raw or self._pending_unnamed, ""
+        return conflict
+
+    def watch_commanders(self, *own_nodes: str) -> None:
+        """Watch the graph for other commanders and consoles of the arm (:mod:`hardware_if.commander_watch`).
+
+        From now on the deadman holds on one, every state command is refused while there is one, and
+        :meth:`exclusive` reads the graph at once. ``own_nodes`` are this program's other nodes (fully
+        qualified names); this node is one of its own.
+        """
+        self._commanders = CommanderWatch(self, self.topics.arm, {self.get_fully_qualified_name(), *own_nodes})
+
+    def settle_graph(self, timeout_s: float) -> None:
+        """Wait for discovery to go quiet before the first command (see :meth:`CommanderWatch.settle`)."""
+        if self._commanders is not None:
+            self._commanders.settle(self._joined_s, timeout_s=timeout_s)
+
+    def exclusive_within(self, timeout_s: float) -> str:
+        """:meth:`exclusive`, read again until it names a conflict or ``timeout_s`` passed (discovery lags)."""
+        deadline = time.monotonic() + timeout_s
+        reason = self.exclusive()
+        while not reason and time.monotonic() < deadline:
+            time.sleep(WATCH_PERIOD_S)
+            reason = self.exclusive()
+        return reason
+
+    def exclusive(self) -> str:
+        """Read the graph now: "" when this program alone commands the arm and one console serves it.
+
+        Otherwise the reason (``another commander: ...`` or ``another console: ...``), which the deadman
+        then holds on. Without :meth:`watch_commanders`, always "".
+        """
+        if self._commanders is None:
+            return ""
+        reason = self._commanders.named_conflict()
+        publisher = self._commands["state_command"]
+        if not reason and publisher is not None and publisher.get_subscription_count() > 1:
+            reason = (
+                f"another console: {publisher.get_subscription_count()} consoles receive "
+                f"{self.topics.topic('state_command')}; one console per arm"
+            )
+        with self._lock:
+            self._conflict = reason
+            self._lock.notify_all()
+        return reason
 
     # -- deadman ----------------------------------------------------------------------------------
     def _facts(self) -> ArmFacts:
@@ -299,6 +381,7 @@ class PsmClient(Node):
             measured_q=measured_q,
             setpoint_q=self._setpoint_q,
             data_fault=self._data_fault,
+            conflict=self._conflict,
         )
 
     def _apply_deadman(self) -> DeadmanStatus:
@@ -347,6 +430,30 @@ class PsmClient(Node):
         with self._lock:
             return list(self._errors)
 
+    def set_wrench_calibration(self, calibration: WrenchCalibration | None) -> None:
+        """Take the force from ``measured_js`` efforts with a calibration's model removed, not ``measured_cf``."""
+        with self._lock:
+            self._calibration = calibration
+
+    def efforts(self) -> np.ndarray:
+        """The latest ``measured_js`` efforts (6,) (zeros when the console sends none)."""
+        with self._lock:
+            message = self._measured
+            if message is None or len(message.effort) != len(JOINT_NAMES):
+                return np.zeros(len(JOINT_NAMES))
+            return np.asarray(message.effort, dtype=float)
+
+    def _calibrated_force(self, message: JointState, rotation: np.ndarray) -> np.ndarray:
+        """The calibrated force in ``<arm>_base`` [N]: computed about the RCM, turned as ``measured_cp`` is."""
+        if self._calibration is None or len(message.effort) != len(JOINT_NAMES):
+            return np.asarray(rotation @ self._force_body_n)
+        local = self._calibration_configuration
+        local.update(convert.joint_state_positions(message))
+        force_local = self._calibration.force(
+            local, convert.joint_state_velocities(message), np.asarray(message.effort)
+        )
+        return np.asarray(rotation @ local.local_pose()[:3, :3].T @ force_local)
+
     # -- Backend ----------------------------------------------------------------------------------
     def measure(self) -> MeasuredState:
         """The latest measurement; its ``stamp_s`` is the arm's. Never blocks, even if the arm is gone.
@@ -363,7 +470,7 @@ class PsmClient(Node):
                 q=convert.joint_state_positions(message),
                 qd=convert.joint_state_velocities(message),
                 jaw=self._jaw,
-                force_n=rotation @ self._force_body_n,
+                force_n=self._calibrated_force(message, rotation),
                 stamp_s=convert.time_to_seconds(message.header.stamp),
             )
 
@@ -440,11 +547,40 @@ class PsmClient(Node):
             s = self._state
             return (s.state if self._state_received else "", bool(s.is_homed), bool(s.is_busy))
 
+    def wait_for_operating_state(self, timeout_s: float) -> tuple[str, bool, bool]:
+        """Wait for the console's current operating state (at most ``timeout_s``) and return it.
+
+        A late subscriber first gets the state topic's history (oldest first), so the first state that
+        arrives may be long gone. The current one is a state stamped since this call, or the last of the
+        history once no more arrived for :data:`STATE_HISTORY_QUIET_S`. Returned as :meth:`operating_state`
+        does (state "" if none came).
+        """
+        deadline = time.monotonic() + timeout_s
+        since_s = self._now_s() - CLOCK_SLACK_S
+
+        def current() -> bool:
+            if not self._state_received:
+                return False
+            fresh = convert.time_to_seconds(self._state.header.stamp) >= since_s
+            return fresh or time.monotonic() - self._state_rx_s >= STATE_HISTORY_QUIET_S
+
+        with self._lock:
+            while not current() and (remaining := deadline - time.monotonic()) > 0.0:
+                self._lock.wait(min(remaining, STATE_HISTORY_QUIET_S))
+        return self.operating_state()
+
     def wait_for_measurement(self, timeout_s: float = 5.0) -> MeasuredState:
-        """Block until a ``measured_js`` has arrived, then return it."""
+        """Block until a ``measured_js`` has arrived, then return it.
+
+        Raises:
+            DvrkTimeoutError: None arrived within ``timeout_s``.
+            DvrkError: The first data were invalid (a fault is latched: nothing later is taken).
+        """
         deadline = time.monotonic() + timeout_s
         with self._lock:
             while self._measured is None:
+                if self._data_fault:
+                    raise DvrkError(f"{self.topics.arm}: {self._data_fault}")
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0:
                     raise DvrkTimeoutError(f"a measured_js from {self.topics.arm}", timeout_s, self._state.state)
@@ -491,7 +627,7 @@ class PsmClient(Node):
                     reason = "no measurement: no measured_js since the episode's reset"
                 if not reason and self._state.is_busy:
                     reason = "not ready: operating state busy (a move or homing is running)"
-                if not reason or self._data_fault:
+                if not reason or self._data_fault or self._conflict:
                     return reason
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0:
@@ -542,6 +678,10 @@ class PsmClient(Node):
                     raise DvrkTimeoutError(f"{self.topics.arm} {command}", timeout_s, last)
 
     def _send_state_command(self, command: str) -> None:
+        """Publish a state command, unless another console or commander would get or contradict it."""
+        reason = self.exclusive()
+        if reason:
+            raise DvrkError(f"{self.topics.arm} {command} not sent: {reason}")
         message = StringStamped(string=command)
         message.header.stamp = convert.seconds_to_time(self._now_s())
         self._command_publisher("state_command").publish(message)

@@ -25,6 +25,11 @@ A recording survives a crash: the writer ends its chunk and flushes the file at 
 :data:`FLUSH_PERIOD_S` of wall time (and at every episode end and hold), so a SIGKILL loses at most about
 the last second. :func:`read_recording` reads such a file, which lacks its summary and footer, with a
 stream reader, and says so (:class:`RecordingRead`).
+
+A file that cannot be written (a full disk, a folder that vanishes or turns read-only, any write error)
+raises :class:`~hardware_if.recording_io.RecordingError`, a hold naming the file and the error, at once
+and once. The torn end is cut off, and what is written afterwards (the hold, the report) is appended as
+plain records if the file system still takes them; the file then reads as far as it got.
 """
 
 from __future__ import annotations
@@ -38,12 +43,14 @@ from types import TracebackType
 from typing import Any
 
 import numpy as np
+from mcap.data_stream import RecordBuilder
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Footer, Message
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
+from hardware_if.recording_io import CheckedFile, RecordingError, describe_os_error
 from sim.scene_stream import LOG_TOPIC, SceneSink, log_message
 
 __all__ = ["CHANNELS", "CHUNK_SIZE_BYTES", "FLUSH_PERIOD_S", "Recorder", "RecordingRead", "read_recording"]
@@ -110,10 +117,18 @@ class Recorder:
         self.path = Path(path)
         self.mirror = mirror
         self._interventions: tuple[str, ...] = ()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = self.path.open("wb")
-        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE_BYTES)
-        self._writer.start(profile="", library="tissue-retract")
+        self._failed: RecordingError | None = None
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = CheckedFile(self.path)
+        except OSError as e:
+            raise RecordingError(self.path, describe_os_error(e)) from None
+        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE_BYTES)  # type: ignore[arg-type]
+        try:
+            self._guarded(lambda: self._writer.start(profile="", library="tissue-retract"))
+        except RecordingError:
+            self._file.close()
+            raise
         self._flushed_s = time.monotonic()
         self._channels: dict[str, int] = {}
         self._sequence = 0
@@ -128,12 +143,36 @@ class Recorder:
         self._scene_schemas: dict[str, int] = {}
         self._closed = False
 
+    @property
+    def failed(self) -> RecordingError | None:
+        """The write error that stopped the recording, or None."""
+        return self._failed
+
+    def _guarded(self, write: Any) -> None:
+        """Run one write to the file; an OS error becomes the recording's failure (raised once)."""
+        try:
+            write()
+        except OSError as e:
+            self._file.rewind()
+            self._failed = RecordingError(self.path, describe_os_error(e))
+            raise self._failed from None
+
+    def _append_after_failure(self, topic: str, data: bytes) -> None:
+        """After a failure: the channel and the message as plain records at the file's good end, if it takes them."""
+        builder = RecordBuilder()
+        channel = self._channels[topic]
+        Channel(id=channel, topic=topic, message_encoding="json", metadata={}, schema_id=0).write(builder)
+        now = time.time_ns()
+        Message(channel_id=channel, log_time=now, data=data, publish_time=now, sequence=self._sequence).write(builder)
+        self._sequence += 1
+        self._file.append(builder.end())
+
     def write_message(self, topic: str, message: Any, t_s: float) -> None:
         """Append a Foxglove SDK message (the 3-D scene) under its protobuf schema, stamped now.
 
         ``t_s`` is the message's own time; the log time is the wall clock, as for every other channel.
         """
-        if self._closed:
+        if self._closed or self._failed is not None:
             return
         channel = self._scene_channels.get(topic)
         if channel is None:
@@ -168,7 +207,11 @@ class Recorder:
 
     def _add(self, channel: int, data: bytes) -> None:
         now = time.time_ns()
-        self._writer.add_message(channel, log_time=now, data=data, publish_time=now, sequence=self._sequence)
+        self._guarded(
+            lambda: self._writer.add_message(
+                channel, log_time=now, data=data, publish_time=now, sequence=self._sequence
+            )
+        )
         self._sequence += 1
         if time.monotonic() - self._flushed_s >= FLUSH_PERIOD_S:
             self.flush()
@@ -177,7 +220,11 @@ class Recorder:
         """Append one message to a channel of :data:`CHANNELS`, stamped now."""
         if self._closed:
             return
-        self._add(self._channels[topic], json.dumps(_jsonable(payload), separators=(",", ":")).encode())
+        data = json.dumps(_jsonable(payload), separators=(",", ":")).encode()
+        if self._failed is not None:
+            self._append_after_failure(topic, data)
+            return
+        self._add(self._channels[topic], data)
         self.counts[topic] += 1
         self._log_to_scene(topic, payload)
         if topic == "/deploy/event" and payload.get("kind") in _FLUSH_EVENTS:
@@ -185,15 +232,25 @@ class Recorder:
 
     def flush(self) -> None:
         """End the chunk in progress and write it to the file (what a crash after this keeps)."""
-        if not self._closed:
-            self._writer.flush()
+        if not self._closed and self._failed is None:
+            self._guarded(self._writer.flush)
+            self._guarded(self._file.flush)
             self._flushed_s = time.monotonic()
 
     def close(self) -> None:
-        """Finish the MCAP (summary and index) and close the file (safe to call twice)."""
-        if not self._closed:
-            self._closed = True
-            self._writer.finish()
+        """Finish the MCAP (summary and index) and close the file (safe to call twice).
+
+        Raises:
+            RecordingError: The end could not be written (the file then reads without its summary).
+        """
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._failed is None:
+                self._guarded(self._writer.finish)
+                self._guarded(self._file.flush)
+        finally:
             self._file.close()
 
     def __enter__(self) -> Recorder:

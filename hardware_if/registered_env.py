@@ -79,14 +79,18 @@ class RegisteredTask(gym.Wrapper):
         """Reset the task and register its site (with the error) and goal."""
         observation, info = self.env.reset(**kwargs)
         task: Any = self.env.unwrapped
-        rng = np.random.default_rng(kwargs.get("seed"))
-        direction = rng.standard_normal(3)
-        distance = self.registration_error_m * (rng.uniform() if self.for_training else 1.0)
-        site = task.site_position() + distance * direction / np.linalg.norm(direction)
+        site = self._register(task, kwargs.get("seed"), info)
         goal = task.goal if self.goal_source == "given" else task.nominal_goal(site)
         self.estimate = TaskEstimate(site, goal)
         info["registered_site"] = site
         return self._estimated(observation), info
+
+    def _register(self, task: Any, seed: int | None, info: dict[str, Any]) -> np.ndarray:
+        """The site as registered [m]: the true one, ``registration_error_m`` off in a seeded direction."""
+        rng = np.random.default_rng(seed)
+        direction = rng.standard_normal(3)
+        distance = self.registration_error_m * (rng.uniform() if self.for_training else 1.0)
+        return np.asarray(task.site_position() + distance * direction / np.linalg.norm(direction))
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Step the task; the observation carries the estimate, ``info`` the truth."""

@@ -22,7 +22,6 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 from geometry_msgs.msg import PointStamped  # type: ignore[import-untyped]
 from rclpy.node import Node
 from std_msgs.msg import Bool, Int64  # type: ignore[import-untyped]
@@ -36,6 +35,7 @@ from hardware_if.registration import console_base_frame, grasp_point
 from hardware_if.session import stop_spin_thread
 from hardware_if.sim_task import task_topic
 from hardware_if.task_estimate import TaskEstimate
+from psm_control.quaternion import quaternion_xyzw
 
 __all__ = ["RegisteredSite", "RemoteTask", "TaskListener"]
 
@@ -291,7 +291,7 @@ class RemoteTask:
         tip = pose[:3, 3]
         self.listener.refresh(self.grasp_position())
         site = self.site_position()
-        quaternion = np.asarray(pin.Quaternion(pose[:3, :3]).coeffs())  # x, y, z, w
+        quaternion = quaternion_xyzw(pose[:3, :3])  # x, y, z, w
         vector = np.concatenate(
             [tip, quaternion, [measured.jaw], site, site - tip, measured.force_n, [float(self.holding)]]
         )

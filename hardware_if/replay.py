@@ -11,19 +11,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.figure import Figure
 
 from hardware_if.crtk import JOINT_NAMES
 from hardware_if.recording import read_recording
 from psm_control.errors import ConfigurationError
 from safety.force_watch import FORCE_LIMIT_EXCEEDED, FORCE_LIMIT_STALL
 
-__all__ = ["Recording", "RecordingSummary", "load_recording", "plot_recording", "summarize_recording"]
+__all__ = ["TICK_GAP_S", "Recording", "RecordingSummary", "answers", "load_recording", "summarize_recording"]
+
+#: Consecutive measurements further apart than this are not one tick and the next (a gap between episodes) [s].
+TICK_GAP_S = 0.5
 
 
 @dataclass
 class Recording:
-    """A recording's channels as arrays (times [s] from the first message)."""
+    """A recording's channels as arrays (times [s] from the first message; ``*_stamp_s``: the arm's or the
+    simulation's own clock, as stamped on each measurement and command)."""
 
     meta: dict[str, Any] = field(default_factory=dict)
     report: dict[str, Any] = field(default_factory=dict)
@@ -36,6 +39,11 @@ class Recording:
     command_sent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     safety_stop: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     predicted_force_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    measured_stamp_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    measured_jaw: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    command_stamp_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    command_jaw: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    intervened: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     actions: int = 0
     #: The file lacked its footer (the run was killed): this is what its complete chunks kept.
     truncated: bool = False
@@ -89,7 +97,10 @@ class RecordingSummary:
             ),
             ("command-to-arm distance max (dry run: nothing was sent) " if self.dry_run else "tracking error max ")
             + "|command(t-1) - measured(t)|: "
-            + ", ".join(f"{n} {v:.4g}" for n, v in zip(JOINT_NAMES, self.tracking_error_max, strict=True)),
+            + ", ".join(
+                f"{n} {v:.4g} {'m' if n == 'insertion' else 'rad'}"
+                for n, v in zip(JOINT_NAMES, self.tracking_error_max, strict=True)
+            ),
         ]
         for e in self.episodes:
             out.append(
@@ -97,6 +108,12 @@ class RecordingSummary:
                 f"peak force {float(e.get('peak_force_n', 0.0)):.3f} N"
             )
         return out
+
+
+def _number(payload: dict[str, Any], key: str) -> float:
+    """A number of a message, nan when it is missing (older recordings) or null (non-finite when written)."""
+    value = payload.get(key)
+    return float(value) if value is not None else float("nan")
 
 
 def load_recording(path: str | Path) -> Recording:
@@ -129,11 +146,16 @@ def load_recording(path: str | Path) -> Recording:
             rows["mt"].append(t - start)
             rows["mq"].append(payload["q"])
             rows["f"].append(payload["force_n"])
+            rows["ms"].append(_number(payload, "stamp_s"))
+            rows["mj"].append(_number(payload, "jaw"))
         elif topic == "/deploy/command":
             rows["ct"].append(t - start)
             rows["cq"].append(payload["q"])
             rows["sent"].append(bool(payload["sent"]))
             rows["stop"].append(bool(payload["safety_stop"]))
+            rows["cs"].append(_number(payload, "stamp_s"))
+            rows["cj"].append(_number(payload, "jaw"))
+            rows["int"].append(bool(payload.get("interventions")))
             predicted = payload.get("predicted_force_n")
             rows["pf"].append(np.nan if predicted is None else float(predicted))
         elif topic == "/deploy/action":
@@ -141,11 +163,31 @@ def load_recording(path: str | Path) -> Recording:
     if rows["mt"]:
         rec.measured_t, rec.measured_q = np.array(rows["mt"]), np.array(rows["mq"], dtype=float)
         rec.force_n = np.array(rows["f"], dtype=float)
+        rec.measured_stamp_s, rec.measured_jaw = np.array(rows["ms"]), np.array(rows["mj"])
     if rows["ct"]:
         rec.command_t, rec.command_q = np.array(rows["ct"]), np.array(rows["cq"], dtype=float)
         rec.command_sent, rec.safety_stop = np.array(rows["sent"]), np.array(rows["stop"])
         rec.predicted_force_n = np.array(rows["pf"], dtype=float)
+        rec.command_stamp_s, rec.command_jaw = np.array(rows["cs"]), np.array(rows["cj"])
+        rec.intervened = np.array(rows["int"], dtype=bool)
     return rec
+
+
+def answers(rec: Recording) -> np.ndarray:
+    """Per measurement, whether it answers the command of the tick before (bool, shape of ``measured_t``).
+
+    Measured at tick t answers the command of tick t-1, within one episode: not the first tick of a
+    recording or of an episode, nor one after a gap (homing between episodes on a robot).
+    """
+    answer = np.zeros(len(rec.measured_t), dtype=bool)
+    if len(rec.measured_t) < 2 or len(rec.command_q) != len(rec.measured_q):
+        return answer
+    answer[1:] = np.diff(rec.measured_t) < TICK_GAP_S
+    for event in rec.events:
+        first = int(np.searchsorted(rec.measured_t, event["t"]))
+        if event.get("kind") == "episode_start" and first < len(answer):
+            answer[first] = False
+    return answer
 
 
 def summarize_recording(rec: Recording) -> RecordingSummary:
@@ -154,10 +196,7 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
     duration = float(times.max() - times.min()) if times.size else 0.0
     force = float(np.linalg.norm(rec.force_n, axis=1).max()) if len(rec.force_n) else 0.0
     if len(rec.command_q) > 1 and len(rec.measured_q) == len(rec.command_q):
-        # Measured at tick t answers the command of tick t-1; pairs across a gap (homing between
-        # episodes) are not tracking.
-        consecutive = np.diff(rec.measured_t) < 0.5
-        error = np.abs(rec.command_q[:-1] - rec.measured_q[1:])[consecutive]
+        error = np.abs(rec.command_q[:-1] - rec.measured_q[1:])[answers(rec)[1:]]
         tracking = error.max(axis=0) if len(error) else np.full(len(JOINT_NAMES), np.nan)
     else:
         tracking = np.full(len(JOINT_NAMES), np.nan)
@@ -182,42 +221,3 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
         force_limit_exceeded=exceeded,
         force_limit_stalls=stalls,
     )
-
-
-def plot_recording(rec: Recording, out: str | Path) -> Path:
-    """Joint commands against measurements, and the force, over time; written to ``out`` (PNG)."""
-    figure = Figure(figsize=(12, 11))
-    axes = figure.subplots(4, 2, sharex=True)
-    for i, name in enumerate(JOINT_NAMES):
-        ax = axes.flat[i]
-        if len(rec.command_q):
-            ax.plot(rec.command_t, rec.command_q[:, i], label="command", lw=1.0)
-        if len(rec.measured_q):
-            ax.plot(rec.measured_t, rec.measured_q[:, i], label="measured", lw=1.0, ls="--")
-        ax.set_ylabel(f"{name} [{'m' if name == 'insertion' else 'rad'}]")
-        ax.legend(loc="best", fontsize=7)
-    ax = axes.flat[6]
-    if len(rec.force_n):
-        ax.plot(rec.measured_t, np.linalg.norm(rec.force_n, axis=1), label="|measured force|")
-    if np.isfinite(rec.predicted_force_n).any():
-        ax.plot(rec.command_t, rec.predicted_force_n, label="|predicted force| (dry run)")
-    ax.set_ylabel("force [N]")
-    ax.legend(loc="best", fontsize=7)
-    ax = axes.flat[7]
-    if len(rec.safety_stop):
-        ax.plot(rec.command_t, rec.safety_stop.astype(float), label="safety stop")
-        ax.plot(rec.command_t, rec.command_sent.astype(float) * 0.5, label="sent (0.5)")
-    for e in rec.events:
-        if e.get("kind") in ("hold", "deadman", "interrupted"):
-            ax.axvline(e["t"], color="red", lw=1.0)
-    ax.set_ylabel("flags")
-    ax.legend(loc="best", fontsize=7)
-    for ax in axes[-1]:
-        ax.set_xlabel("time [s]")
-    kind = "dry run" if rec.meta.get("dry_run") else "deploy"
-    figure.suptitle(f"{rec.meta.get('target', '?')} {kind}: {rec.meta.get('policy', '')}")
-    figure.tight_layout()
-    path = Path(out)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=80)
-    return path

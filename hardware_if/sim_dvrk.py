@@ -55,6 +55,7 @@ from std_msgs.msg import Bool, Empty, Float64, Float64MultiArray, MultiArrayDime
 
 from hardware_if import convert
 from hardware_if.arm_model import ArmModel, ArmSample, KinematicArm
+from hardware_if.console_guard import CommandSources, other_consoles
 from hardware_if.crtk import (
     DEFAULT_ARM,
     DEFAULT_RATE_HZ,
@@ -66,9 +67,11 @@ from hardware_if.crtk import (
     event_qos,
     periodic_qos,
 )
+from hardware_if.errors import DvrkError
 from hardware_if.motion import JointTrajectory, inverse_kinematics
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
+from sim.force_sensing import ForceSensor, console_force, sensing_params
 from sim.scene_stream import SceneStream
 
 __all__ = ["HOMING_SETTLE_S", "OPERATING_STATE_REPUBLISH_S", "SimulatedPsm"]
@@ -97,6 +100,14 @@ class SimulatedPsm(Node):
         scene: Where the arm (measured and set-point) and the task's markers are streamed as a 3-D scene
             every tick (``sim-dvrk --live``); None streams nothing.
         context: rclpy context of the node; default rclpy's default context.
+        sensor: What the console makes of the tissue force: the joint efforts on ``measured_js`` and the
+            ``measured_cf`` computed from them (:mod:`sim.force_sensing`); default the ``dvrk`` model, the
+            console's uncompensated estimate, so that a rehearsal meets the sensor the robot has.
+        exclusive: Refuse to serve an arm that another console already serves on the domain (waits up to
+            :data:`~hardware_if.console_guard.CONSOLE_DISCOVERY_S` for discovery first).
+
+    Raises:
+        DvrkError: ``exclusive`` and another node already publishes the arm's ``measured_js``.
     """
 
     def __init__(
@@ -111,6 +122,8 @@ class SimulatedPsm(Node):
         homing_settle_s: float = HOMING_SETTLE_S,
         scene: SceneStream | None = None,
         context: Any = None,
+        sensor: ForceSensor | None = None,
+        exclusive: bool = False,
     ) -> None:
         if not (np.isfinite(rate_hz) and 1.0 <= rate_hz <= 5000.0):
             raise ConfigurationError("rate_hz", rate_hz, "a publishing rate in 1..5000 Hz")
@@ -118,6 +131,12 @@ class SimulatedPsm(Node):
             raise ConfigurationError("homing_settle_s", homing_settle_s, "a duration in 0..60 s")
         self.topics = ArmTopics(arm)
         super().__init__(f"{arm.lower()}_sim_dvrk", context=context)
+        if exclusive and (others := other_consoles(self, arm)):
+            self.destroy_node()
+            raise DvrkError(
+                f"/{arm} is already served on this ROS domain by {', '.join(others)}: one console per arm "
+                "(stop that one, or serve another --arm or --domain-id)"
+            )
         self.period_s = 1.0 / rate_hz
         self.homing_settle_s = float(homing_settle_s)
         self.model = model if model is not None else PsmModel.from_variant()
@@ -141,6 +160,8 @@ class SimulatedPsm(Node):
         self.trajectory_ratio = 1.0
         self.settings = {"use_gravity_compensation": True, "body/set_cf_orientation_absolute": False}
         self._sample: ArmSample = self.arm_model.reset(self._setpoint_q, self._setpoint_jaw)
+        self.sensor = sensor if sensor is not None else ForceSensor(sensing_params("dvrk"))
+        self._sense(0.0)
         self._last_tick_s = time.monotonic()
         self._answered = False  # a servo command's measured_js and setpoint_js went out since the last tick
 
@@ -163,6 +184,7 @@ class SimulatedPsm(Node):
         self._goal_reached = self.create_publisher(Bool, t("goal_reached"), event)
         self._ratio = self.create_publisher(Float64, t("trajectory_j/ratio"), event)
         # Commands arrive volatile: a restarted console must not replay an old "home" from history.
+        self.command_sources = CommandSources(self, arm, partial(self._event, "warning"))
         subscriptions: tuple[tuple[type, str, Callable[[Any], None]], ...] = (
             (StringStamped, "state_command", self._on_state_command),
             (JointState, "servo_jp", self._on_servo_jp),
@@ -181,10 +203,11 @@ class SimulatedPsm(Node):
             (Empty, "free", self._on_free),
             (Float64, "trajectory_j/set_ratio", self._on_set_ratio),
         )
+        noting = self.command_sources.noting
         for message_type, name, callback in subscriptions:
-            self.create_subscription(message_type, t(name), callback, state)
+            self.create_subscription(message_type, t(name), noting(name, callback), state)
         for name in ("use_gravity_compensation", "body/set_cf_orientation_absolute", "emulate_tool_present"):
-            self.create_subscription(Bool, t(name), partial(self._on_setting, name=name), state)
+            self.create_subscription(Bool, t(name), noting(name, partial(self._on_setting, name=name)), state)
         self.create_service(QueryForwardKinematics, t("forward_kinematics"), self._on_forward_kinematics)
         self.create_service(QueryForwardKinematics, t("local/forward_kinematics"), self._on_local_forward_kinematics)
         self.create_service(QueryInverseKinematics, t("inverse_kinematics"), self._on_inverse_kinematics)
@@ -196,6 +219,12 @@ class SimulatedPsm(Node):
         """Move the RCM in ``<arm>_base`` (as the dVRK's ``set_base_frame``; a task reset moves it)."""
         for configuration in (self.configuration, self._ik_configuration, self._fk_configuration):
             configuration.set_base_frame(transform_rcm_to_base)
+
+    def place_arm(self, q: np.ndarray, jaw: float) -> None:
+        """Put the arm (measured and set-point) at ``q`` and ``jaw``, as an operator moves a disabled arm by hand."""
+        self._setpoint_q = self.model.check_joints(q, strict=True).copy()
+        self._setpoint_jaw = float(jaw)
+        self._sample = self.arm_model.reset(self._setpoint_q, self._setpoint_jaw)
 
     @property
     def busy(self) -> bool:
@@ -574,6 +603,7 @@ class SimulatedPsm(Node):
             self.state.is_homed = True
             self._event("status", f"{self.topics.arm}: homed")
         self._sample = self.arm_model.step(dt)
+        self._sense(dt)
         if self._mode == "free":
             self._servo(self._sample.q, self._sample.jaw)  # nothing holds the arm: the set-point follows it
         # A servo command answered since the last tick already sent measured_js and setpoint_js: a stream
@@ -629,6 +659,13 @@ class SimulatedPsm(Node):
         """
         return bool(self._pub[name].get_subscription_count() > 0)
 
+    def _sense(self, dt_s: float) -> None:
+        """The console's efforts and force estimate for the arm's state now (once per tick)."""
+        sample = self._sample
+        self.configuration.update(sample.q, sample.jaw)
+        self._efforts = self.sensor.efforts(self.configuration, sample.qd, sample.force_n, dt_s)
+        self._sensed_force = console_force(self.configuration.base_jacobian(), self._efforts)
+
     def _publish_state(self, *, joints: bool) -> None:
         """One period's state topics; the arm's ``measured_js``/``setpoint_js`` only with ``joints``."""
         stamp = self._stamp()
@@ -640,10 +677,10 @@ class SimulatedPsm(Node):
     def _publish_arm_joints(self, stamp: float | None = None) -> None:
         stamp, sample = self._stamp() if stamp is None else stamp, self._sample
         if self._subscribed("measured_js"):
-            # Joint efforts: what the motors exert against the force on the tool (J^T f), plus a commanded
-            # effort in effort mode. The dVRK estimates measured_cf from these efforts the other way round.
-            self.configuration.update(sample.q, sample.jaw)
-            effort = self.configuration.base_jacobian()[:3].T @ sample.force_n
+            # Joint efforts: what the motors exert against the force on the tool (J^T f) and what the console
+            # does not model (self.sensor), plus a commanded effort in effort mode. measured_cf is computed
+            # from them the other way round, as the console does.
+            effort = self._efforts
             if self._mode == "effort":
                 effort = effort + self._setpoint_effort
             self._pub["measured_js"].publish(
@@ -680,11 +717,11 @@ class SimulatedPsm(Node):
         self._publish_pose("measured", wanted, stamp)
         rotation = self.configuration.measured_pose()[:3, :3]
         if "spatial/measured_cf" in wanted:
-            spatial = convert.wrench_stamped(sample.force_n, frame_id=base_id, stamp_s=stamp)
+            spatial = convert.wrench_stamped(self._sensed_force, frame_id=base_id, stamp_s=stamp)
             self._pub["spatial/measured_cf"].publish(spatial)
         if "body/measured_cf" in wanted:
             tip_id = f"{self.topics.arm}_tip"
-            body = convert.wrench_stamped(rotation.T @ sample.force_n, frame_id=tip_id, stamp_s=stamp)
+            body = convert.wrench_stamped(rotation.T @ self._sensed_force, frame_id=tip_id, stamp_s=stamp)
             self._pub["body/measured_cf"].publish(body)
         if not wanted & {"spatial/jacobian", "body/jacobian", "measured_cv", "local/measured_cv"}:
             return

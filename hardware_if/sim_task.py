@@ -18,8 +18,10 @@ truth to a file instead, to score a blind run.
 
 from __future__ import annotations
 
-import json
+import queue
+import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
@@ -28,12 +30,17 @@ import numpy as np
 import sim.envs
 from hardware_if.arm_model import ArmSample
 from hardware_if.crtk import periodic_qos
+from hardware_if.endoscope_stream import EndoscopeStream, SceneState
+from hardware_if.motion import inverse_kinematics
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from safety.config import SafetyConfig
 from sim.scene import PhysicsParams
+from sim.strict_json import strict_dumps
+from sim.tissue import SITE_NAMES, TissueParams
 
 __all__ = [
     "JAW_LEVER_M",
+    "PLACEABLE_SITES",
     "TASK_PHYSICS_PERIOD_S",
     "TASK_TOPICS",
     "SetpointFollower",
@@ -47,6 +54,14 @@ __all__ = [
 TASK_PHYSICS_PERIOD_S = 1.0 / 120.0
 #: Distance of the grasp point from the jaw's pivot [m]: half the Large Needle Driver's jaw.
 JAW_LEVER_M = 0.005
+#: Where ``sim-dvrk --place-jaws-on`` can put the closed jaws: the episode's grasp site, or a named one.
+PLACEABLE_SITES = ("site", *SITE_NAMES)
+#: Physics steps with the same set-point after which the scene is checked for rest (1 s of simulated time).
+REST_AFTER_STEPS = 120
+#: Largest motion of any flap node over :data:`REST_AFTER_STEPS` steps for the scene to be at rest [m].
+REST_MOTION_M = 1e-6
+#: Grasp-point error at which the jaws count as on a site [m].
+_PLACE_TOLERANCE_M = 1e-4
 #: Simulation-only topics under ``/<arm>/task/`` (a perception node's job on a real robot).
 TASK_TOPICS = {
     "site": "geometry_msgs/PointStamped: the grasp site on the flap, in <arm>_base [m]",
@@ -103,15 +118,18 @@ class TaskArm:
             the simulation runs slower than the wall clock instead of falling ever further behind.
         blind: Report the jaw as a real one on tissue (stalled open on the held flap) for a client
             that senses the grasp with it.
+        texture: The flap's texture image file (None: the procedural textures).
     """
 
     instantaneous = False
 
-    def __init__(self, task: str, *, seed: int = 0, max_steps_per_call: int = 6, blind: bool = False) -> None:
+    def __init__(
+        self, task: str, *, seed: int = 0, max_steps_per_call: int = 6, blind: bool = False, texture: str | None = None
+    ) -> None:
         self.blind = blind
         self._jaw = 0.0
         physics = PhysicsParams(substeps=2, control_period_s=TASK_PHYSICS_PERIOD_S)
-        self.env: Any = sim.envs.make(task, physics=physics).unwrapped
+        self.env: Any = sim.envs.make(task, physics=physics, tissue=TissueParams(texture_path=texture)).unwrapped
         self.task = task
         self.step_s = physics.step_s
         self.max_steps_per_call = max_steps_per_call
@@ -122,20 +140,91 @@ class TaskArm:
         self.episode_seed = seed
         self._info: dict[str, Any] = {}
         self._achieved = np.zeros(3)
+        #: Where the scene's state goes for the endoscope's images (``sim-dvrk --endoscope``); None: nowhere.
+        self.endoscope: EndoscopeStream | None = None
+        # Held while the scene is rebuilt (on a thread of its own, see TaskTopics): the console keeps
+        # publishing the arm as it was instead of waiting for the new scene.
+        self._scene_lock = threading.Lock()
+        self._held = ArmSample(np.zeros(6), np.zeros(6), 0.0, np.zeros(3))
+        self._state: dict[str, Any] = {}
+        self._markers: dict[str, Any] = {}
+        self._rest_setpoint = np.zeros(7)
+        self._rest_nodes: np.ndarray | None = None
+        self._still_steps = 0
+        self._asleep = False
         self.reset_scene(seed)
 
     # -- the scene ---------------------------------------------------------------------------------
-    def reset_scene(self, seed: int) -> None:
-        """Rebuild the flap for a new episode; the arm stays at its set-point."""
-        observation, self._info = self.env.reset(seed=seed)
-        self._achieved = np.asarray(observation["achieved_goal"], dtype=float)
-        self.episode_seed = seed
-        self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
-        self._info = {**self._info, "grasped": False}
+    def reset_scene(self, seed: int) -> np.ndarray:
+        """Rebuild the flap for a new episode; the arm stays at its set-point.
+
+        Safe to call from another thread than the one that steps: meanwhile :meth:`step` returns the arm
+        as it was and no simulated time passes; the new scene's time starts when the reset ends.
+
+        Returns:
+            The new episode's RCM pose in the world (4x4), read while the new scene was current.
+        """
+        with self._scene_lock:
+            observation, self._info = self.env.reset(seed=seed)
+            self._achieved = np.asarray(observation["achieved_goal"], dtype=float)
+            self.episode_seed = seed
+            self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
+            self._info = {**self._info, "grasped": False}
+            self._debt_s, self._qd = 0.0, np.zeros(6)
+            self._rest_nodes, self._still_steps, self._asleep = None, 0, False
+            self._held = self._sample()
+            self._state, self._markers = self._read_task_state(), self._read_scene_markers()
+            return self._base_frame()
+
+    def jaws_on(self, name: str) -> np.ndarray:
+        """Joints that put the grasp point (closed jaws) on a site of the current scene, tool as at home.
+
+        Args:
+            name: ``site`` (the episode's grasp site) or one of the flap's named sites (``centre``, ...).
+
+        Raises:
+            KeyError: ``name`` is not in :data:`PLACEABLE_SITES`.
+        """
+        if name not in PLACEABLE_SITES:
+            raise KeyError(f"unknown site {name!r}; one of {', '.join(PLACEABLE_SITES)}")
+        with self._scene_lock:
+            if name == "site":
+                target = np.asarray(self.env.site_position(), dtype=float)
+            else:
+                tissue = self.env.scene.tissue
+                nodes, weights = tissue.site_binding(tissue.site_local[name])
+                target = np.asarray(weights @ tissue.positions()[nodes], dtype=float)
+            base_frame = self._base_frame()
+        configuration = self.env.model.configuration(self.home_q, base_frame=base_frame)
+        configuration.update(self.home_q, 0.0)
+        q = self.home_q
+        for _ in range(10):  # the tip's goal moves by the grasp point's error: the orientation stays the home's
+            error = target - np.asarray(configuration.grasp_position(), dtype=float)
+            if np.linalg.norm(error) < _PLACE_TOLERANCE_M:
+                break
+            goal = np.asarray(configuration.local_pose(), dtype=float).copy()
+            goal[:3, 3] += base_frame[:3, :3].T @ error
+            q, _ = inverse_kinematics(configuration, goal)
+            configuration.update(q, 0.0)
+        return np.asarray(q, dtype=float)
+
+    @property
+    def at_rest(self) -> bool:
+        """True while the scene sleeps: the same set-point for a while and the flap still."""
+        return self._asleep
+
+    @property
+    def resetting(self) -> bool:
+        """True while a scene reset runs."""
+        return self._scene_lock.locked()
 
     @property
     def base_frame(self) -> np.ndarray:
         """Pose of the RCM in the world (= ``<arm>_base``) for the current episode (4x4)."""
+        with self._scene_lock:
+            return self._base_frame()
+
+    def _base_frame(self) -> np.ndarray:
         return np.asarray(self.env.scene.configuration.base_frame).copy()
 
     @property
@@ -144,7 +233,23 @@ class TaskArm:
         return np.asarray(self.env.model.home(), dtype=float)
 
     def task_state(self) -> dict[str, Any]:
-        """Ground truth a perception node would supply: site, goal, achieved goal [m], grasped; the grasp point."""
+        """Ground truth a perception node would supply: site, goal, achieved goal [m], grasped; the grasp point.
+
+        During a scene reset: the last state before it.
+        """
+        self._state = self._unless_resetting(self._read_task_state, self._state)
+        return dict(self._state)
+
+    def _unless_resetting(self, read: Callable[[], dict[str, Any]], last: dict[str, Any]) -> dict[str, Any]:
+        """``read()`` of the current scene, or ``last`` while a reset rebuilds it."""
+        if not self._scene_lock.acquire(blocking=False):
+            return last
+        try:
+            return read()
+        finally:
+            self._scene_lock.release()
+
+    def _read_task_state(self) -> dict[str, Any]:
         return {
             "site": np.asarray(self.env.site_position(), dtype=float),
             "goal": np.asarray(self.env.goal, dtype=float),
@@ -154,7 +259,14 @@ class TaskArm:
         }
 
     def scene_markers(self) -> dict[str, Any]:
-        """The flap, site, goal, grasp point and the force on it, in the world (= ``<arm>_base``)."""
+        """The flap, site, goal, grasp point and the force on it, in the world (= ``<arm>_base``).
+
+        During a scene reset: the last markers before it.
+        """
+        self._markers = self._unless_resetting(self._read_scene_markers, self._markers)
+        return dict(self._markers)
+
+    def _read_scene_markers(self) -> dict[str, Any]:
         goal = np.asarray(self.env.goal, dtype=float)
         return {
             "nodes": self.env.scene.tissue.positions(),
@@ -169,9 +281,11 @@ class TaskArm:
     def reset(self, q: np.ndarray, jaw: float) -> ArmSample:
         """Place the arm at ``q`` in the current scene."""
         self.command(q, jaw)
-        self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
-        self._qd = np.zeros(6)
-        return self._sample()
+        with self._scene_lock:
+            self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
+            self._qd = np.zeros(6)
+            self._held = self._sample()
+            return self._held
 
     def command(self, q: np.ndarray, jaw: float) -> None:
         """Set the set-point the arm holds during the next physics steps."""
@@ -179,7 +293,23 @@ class TaskArm:
         self.follower.jaw = float(jaw)
 
     def step(self, dt_s: float) -> ArmSample:
-        """Run the physics steps that cover ``dt_s`` [s] (at most ``max_steps_per_call``)."""
+        """Run the physics steps that cover ``dt_s`` [s] (at most ``max_steps_per_call``).
+
+        During a scene reset the arm is returned as it was and no simulated time passes.
+        """
+        if not self._scene_lock.acquire(blocking=False):
+            return self._held
+        try:
+            self._held = self._step(dt_s)
+            return self._held
+        finally:
+            self._scene_lock.release()
+
+    def _step(self, dt_s: float) -> ArmSample:
+        if self._at_rest():  # a still scene is not stepped, but the endoscope keeps filming it
+            self._debt_s, self._qd = 0.0, np.zeros(6)
+            self._offer_frame()
+            return self._held
         self._debt_s += max(dt_s, 0.0)
         before = np.asarray(self.env.backend.q, dtype=float).copy()
         steps = 0
@@ -188,11 +318,40 @@ class TaskArm:
             self._achieved = np.asarray(observation["achieved_goal"], dtype=float)
             self._debt_s -= self.step_s
             steps += 1
+        self._still_steps += steps
         if steps == self.max_steps_per_call:
             self._debt_s = min(self._debt_s, self.step_s)  # behind the wall clock: slow down, do not pile up
         if steps:
             self._qd = (np.asarray(self.env.backend.q, dtype=float) - before) / (steps * self.step_s)
+        self._offer_frame()
         return self._sample(steps * self.step_s)
+
+    def _offer_frame(self) -> None:
+        """Give the endoscope the scene when a frame is due (``sim-dvrk --endoscope``)."""
+        if self.endoscope is not None and self.endoscope.due():
+            backend = self.env.backend
+            nodes = self.env.scene.tissue.positions()
+            self.endoscope.offer(
+                SceneState(self.episode_seed, nodes, backend.q.copy(), float(backend.jaw), time.time())
+            )
+
+    def _at_rest(self) -> bool:
+        """True when stepping would change nothing: the same set-point for a while and the flap still.
+
+        An idle console then costs no physics (an idle sim-dvrk stepped the cloth 120 times a second for
+        nothing, held or not). A held flap at rest stays held: the grasp lets go only of a pull above its
+        capacity, which a still flap does not change. A new set-point or a reset wakes it.
+        """
+        setpoint = np.append(self.follower.q, self.follower.jaw)
+        if not np.array_equal(setpoint, self._rest_setpoint):
+            self._rest_setpoint, self._still_steps, self._rest_nodes, self._asleep = setpoint, 0, None, False
+            return False
+        if self._asleep or self._still_steps < REST_AFTER_STEPS:
+            return self._asleep
+        nodes = np.asarray(self.env.scene.tissue.positions(), dtype=float)
+        last, self._rest_nodes, self._still_steps = self._rest_nodes, nodes, 0
+        self._asleep = last is not None and float(np.max(np.abs(nodes - last))) < REST_MOTION_M
+        return self._asleep
 
     def _sample(self, dt_s: float = 0.0) -> ArmSample:
         backend = self.env.backend
@@ -210,8 +369,9 @@ class TaskArm:
         return ArmSample(q, self._qd.copy(), jaw, force, velocity, effort)
 
     def close(self) -> None:
-        """Release the physics client."""
-        self.env.close()
+        """Release the physics client (after a reset that is running)."""
+        with self._scene_lock:
+            self.env.close()
 
 
 class TaskTopics:
@@ -241,18 +401,41 @@ class TaskTopics:
         self._int = Int64
         self._resets = 0
         self._resets_pub = node.create_publisher(Int64, task_topic(arm, "resets"), qos)
+        # A reset rebuilds the scene on a thread of its own: the console's timer keeps publishing the arm
+        # (measured_js at its rate) meanwhile, so a client's deadman never sees the simulator's reset as a
+        # dead robot. Finished resets are taken up on the executor's thread, in _publish.
+        self._requests: queue.SimpleQueue[int | None] = queue.SimpleQueue()
+        self._finished: queue.SimpleQueue[tuple[int, np.ndarray]] = queue.SimpleQueue()
+        self._worker = threading.Thread(target=self._reset_scenes, name=f"{arm}-scene-reset", daemon=True)
+        self._worker.start()
         node.create_subscription(Int64, task_topic(arm, "reset"), self._on_reset, qos)
         node.create_timer(node.period_s, self._publish)
 
     def _on_reset(self, message: Any) -> None:
-        self.arm_model.reset_scene(int(message.data))
-        self.node.set_base_frame(self.arm_model.base_frame)
-        self._resets += 1
-        self.node.get_logger().info(f"task scene reset (seed {int(message.data)})")
+        self._requests.put(int(message.data))
+
+    def _reset_scenes(self) -> None:
+        while (seed := self._requests.get()) is not None:
+            self._finished.put((seed, self.arm_model.reset_scene(seed)))
+
+    def close(self) -> None:
+        """Stop the reset thread after the reset it runs, if any."""
+        self._requests.put(None)
+        self._worker.join(timeout=10.0)
 
     def _publish(self) -> None:
         from hardware_if import convert  # the ros extra (message types), as above
 
+        while not self._finished.empty():
+            seed, base_frame = self._finished.get()
+            self.node.set_base_frame(base_frame)
+            self._resets += 1
+            self.node.get_logger().info(f"task scene reset (seed {seed})")
+        if self.arm_model.resetting:
+            return  # the old scene's state is not news, and the new scene's is not ready yet
+        publishers = [*self._pub.values(), self._grasped, self._resets_pub]
+        if not any(publisher.get_subscription_count() for publisher in publishers):
+            return  # nobody listens: an idle console builds nothing (a subscriber gets the next period's)
         state = self.arm_model.task_state()
         stamp = convert.seconds_to_time(float(self.node.get_clock().now().nanoseconds) * 1e-9)
         frame_id = self.node.topics.base_frame_id
@@ -293,8 +476,10 @@ class TruthLog:
             "grasped": state["grasped"],
             **{name: [float(v) for v in state[name]] for name in ("site", "achieved_goal", "goal", "grasp_point")},
             "distance_m": float(np.linalg.norm(state["achieved_goal"] - state["goal"])),
+            # The true tissue force, whatever the console makes of it.
+            "force_n": float(np.linalg.norm(self.arm_model.scene_markers()["force_n"])),
         }
-        self._file.write(json.dumps(line) + "\n")
+        self._file.write(strict_dumps(line) + "\n")
 
     def close(self) -> None:
         """Close the file."""

@@ -208,8 +208,10 @@ class OverlappedCollector(Collector):
         return list(episodes)
 
     def close(self) -> None:
-        """Stop the worker."""
-        self._envs.close()
+        """Stop the worker at once: it holds nothing to save, and its orderly exit (torch's and PyBullet's
+        teardown) took seconds on a loaded machine. Closing twice is harmless."""
+        if not self._envs.closed:
+            self._envs.close(terminate=True)
 
 
 def _first(batch: dict[str, np.ndarray]) -> Observation:

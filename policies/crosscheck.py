@@ -24,7 +24,6 @@ Run as ``python -m policies.crosscheck --episodes 300 --seed 1 --out runs/crossc
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
@@ -36,6 +35,7 @@ import sim.envs
 from psm_control.errors import ConfigurationError
 from sim.envs import MAX_EPISODE_STEPS
 from sim.evaluation import FAILURE_CLASSES, run_episode
+from sim.strict_json import write_strict_json
 from sim.sweep import wilson_interval
 
 __all__ = ["TASK_ID", "crosscheck_sb3", "main"]
@@ -162,7 +162,7 @@ def crosscheck_sb3(
         directory = Path(out)
         directory.mkdir(parents=True, exist_ok=True)
         model.save(directory / "sb3_ddpg_her.zip")
-        (directory / "result.json").write_text(json.dumps(result, indent=2))
+        write_strict_json(directory / "result.json", result)
         if normalizer is not None:
             normalizer.save(str(directory / "vecnormalize.pkl"))
     return result

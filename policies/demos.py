@@ -111,9 +111,16 @@ def default_attempts(count: int) -> int:
 
 
 def collect_demos(
-    env: gym.Env[Any, Any], expert: ExpertFactory, count: int, seed: int, max_attempts: int | None = None
+    env: gym.Env[Any, Any],
+    expert: ExpertFactory,
+    count: int,
+    seed: int,
+    max_attempts: int | None = None,
+    on_success: Callable[[], None] | None = None,
 ) -> list[Episode]:
     """``count`` successful expert episodes (failed ones are discarded), seeded from ``seed``.
+
+    ``on_success`` is called after each successful episode (a progress bar).
 
     Raises:
         DemonstrationError: The expert did not succeed ``count`` times within ``max_attempts`` episodes.
@@ -128,6 +135,8 @@ def collect_demos(
         episode, success = rollout(env, controller, seed=seed + i)
         if success:
             episodes.append(episode)
+            if on_success is not None:
+                on_success()
     if len(episodes) < count:
         raise DemonstrationError(f"the expert succeeded in only {len(episodes)} of {attempts} episodes")
     return episodes

@@ -30,9 +30,11 @@ from policies.errors import ReproductionError
 from policies.trainer import RunSpec, train
 from psm_control import __version__
 from psm_control.errors import UnknownVariantError
+from sim.strict_json import write_strict_json
 from sim.sweep import BACKENDS
 from sim.sweep.cluster import ray_cluster
 from sim.sweep.page import Page, percent
+from sim.sweep.stopping import stop_pool
 
 __all__ = [
     "OUTCOME_FILE",
@@ -158,7 +160,7 @@ def _execute(run: Run) -> RunOutcome:
         "commit": _commit(),
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
-    (run.out_dir / OUTCOME_FILE).write_text(json.dumps(record, indent=1) + "\n")
+    write_strict_json(run.out_dir / OUTCOME_FILE, record, indent=1)
     return outcome
 
 
@@ -237,8 +239,12 @@ def run_all(runs: Iterable[Run], jobs: int = 1, backend: str = "local") -> list[
     else:
         with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = [pool.submit(_execute, run) for run in runs]
-            for run, future in zip(runs, futures, strict=True):
-                collect(run, future.result)
+            try:
+                for run, future in zip(runs, futures, strict=True):
+                    collect(run, future.result)
+            except KeyboardInterrupt:  # finished runs are on disk; the running ones resume from their checkpoints
+                stop_pool(pool)
+                raise
     if failures:
         raise ReproductionError(failures)
     return outcomes

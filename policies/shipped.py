@@ -15,7 +15,7 @@ from pathlib import Path
 
 from psm_control.errors import UnknownVariantError
 
-__all__ = ["PRETRAINED", "ShippedClaim", "shipped_claim", "shipped_policy_path", "shipped_tasks"]
+__all__ = ["PRETRAINED", "ShippedClaim", "policy_file", "shipped_claim", "shipped_policy_path", "shipped_tasks"]
 
 #: The policy name that selects the shipped policy of a task.
 PRETRAINED = "pretrained"
@@ -40,6 +40,17 @@ def shipped_policy_path(task_id: str) -> Path:
     if not path.exists():
         raise UnknownVariantError("pretrained policy for task", task_id, shipped_tasks())
     return path
+
+
+def policy_file(policy: str, task_id: str) -> Path | None:
+    """The file a ``--policy`` name loads: the shipped policy for ``pretrained``, else the path if it is a file.
+
+    None for policies that are code (``scripted``, ``random``, ``module:callable``) or a missing shipped file.
+    """
+    if policy == PRETRAINED:
+        path = _directory() / f"{task_id}.safetensors"
+        return path if path.is_file() else None
+    return Path(policy) if Path(policy).is_file() else None
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from policies.algos import Agent, Dims, make_agent
+from policies.budget import Budget
 from policies.buffers import Episode, EpisodeBuffer, RewardFn
 from policies.checkpoint import (
     check_spaces,
@@ -141,6 +142,10 @@ class TrainResult:
     policy_episode: int = 0
     policy_success: float = float("nan")
     stopped_early: bool = False
+    demos_used: int = 0
+    pretrain_steps: int = 0
+    #: (episode, evaluation episodes run) of each evaluation the budget cut short.
+    cut_evaluations: list[tuple[int, int]] = field(default_factory=list)
 
     @property
     def steps_per_second(self) -> float:
@@ -191,63 +196,96 @@ def ensure_registered(task_id: str) -> str:
     return task_id
 
 
-def evaluate(agent: Agent, env: gym.Env[Any, Any], episodes: int) -> float:
-    """Success rate of the deterministic actor over fixed evaluation episodes (success at the final step)."""
-    successes = 0
+def evaluate(
+    agent: Agent, env: gym.Env[Any, Any], episodes: int, out_of_time: Callable[[], bool] | None = None
+) -> tuple[float, int]:
+    """Success rate of the deterministic actor over fixed evaluation episodes (success at the final step).
+
+    Returns:
+        The success rate and the episodes it is over: all ``episodes``, or fewer (at least one) when
+        ``out_of_time()`` said so before an episode.
+    """
+    successes, ran = 0, 0
     for i in range(episodes):
+        if ran and out_of_time is not None and out_of_time():
+            break
         _, success = rollout(env, lambda o: agent.act(o["observation"], o["desired_goal"]), seed=_EVAL_SEED + i)
         successes += success
-    return successes / episodes
+        ran += 1
+    return successes / ran, ran
 
 
-def _demonstrations(spec: RunSpec, env: gym.Env[Any, Any], dims: Dims, collector: Collector) -> list[Episode]:
+#: Demonstrations collected between two looks at the budget (and between this process and the worker).
+DEMO_CHUNK = 10
+#: Pretraining updates between two looks at the budget.
+PRETRAIN_CHUNK = 100
+
+
+def _demonstrations(
+    spec: RunSpec,
+    env: gym.Env[Any, Any],
+    dims: Dims,
+    collector: Collector,
+    budget: Budget | None = None,
+    on_success: Callable[[int], None] | None = None,
+) -> list[Episode]:
     """The run's demonstrations: from its file, or from the task's expert (half of them in the collecting
-    worker, if there is one, seeded after every seed the other half may try)."""
+    worker, if there is one, seeded after every seed the other half may try).
+
+    Under a budget they are collected in chunks of :data:`DEMO_CHUNK` (alternately here and in the worker),
+    and collection stops, with fewer than asked, once half the budget is spent
+    (:data:`policies.budget.PREPARATION_SHARE`).
+    ``on_success(n)`` reports ``n`` more demonstrations collected.
+    """
     if spec.demos == 0:
         return []
     if spec.demos_file is not None:
         return load_demos(spec.demos_file, spec.demos, dims=(dims.obs, dims.goal, dims.action))
     seed = _DEMO_SEED + 1000 * spec.seed
-    if not isinstance(collector, OverlappedCollector) or spec.demos < 2:
-        return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=seed)
+    tick = (lambda: on_success(1)) if on_success is not None else None
+    worker = collector if isinstance(collector, OverlappedCollector) else None
+    if budget is not None and budget.budget_s is not None:
+        return _budgeted_demonstrations(spec, env, worker, budget, seed, on_success)
+    if worker is None or spec.demos < 2:
+        return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=seed, on_success=tick)
     here = spec.demos // 2
-    collector.start_demonstrations(spec.demos - here, seed + default_attempts(here))
-    episodes = collect_demos(env, expert_for(spec.task_id), here, seed=seed)
-    return episodes + collector.finish_demonstrations()
+    worker.start_demonstrations(spec.demos - here, seed + default_attempts(here))
+    episodes = collect_demos(env, expert_for(spec.task_id), here, seed=seed, on_success=tick)
+    there = worker.finish_demonstrations()
+    if on_success is not None:
+        on_success(len(there))
+    return episodes + there
 
 
-#: Kept free at the end of a budget [s]: closing the environments and the interpreter's exit with torch,
-#: Numba and PyBullet loaded took 0.8-1.2 s on the 2-core machine of the README's figures.
-_FINISH_RESERVE_S = 1.5
-
-
-class _Budget:
-    """The run's wall-clock budget: whether one more training episode and a last evaluation still fit.
-
-    Every estimate is the last measured one: a training episode's wall time (collection and updates), an
-    evaluation's with its checkpoint; before the first evaluation, its episodes at the collection's
-    wall time per step, doubled (the actor's forward passes and the checkpoint come on top). The
-    process's exit (:data:`_FINISH_RESERVE_S`) is kept free too.
-    """
-
-    def __init__(self, budget_s: float | None, started_s: float, clock: Callable[[], float] = time.monotonic) -> None:
-        self.budget_s = budget_s
-        self.started_s = started_s
-        self._clock = clock
-        self.episode_s = 0.0
-        self.step_s = 0.0
-        self.evaluation_s: float | None = None
-
-    def elapsed(self) -> float:
-        """Seconds since the budget started."""
-        return self._clock() - self.started_s
-
-    def fits_episode(self, eval_episodes: int, horizon: int) -> bool:
-        """One more episode and the last evaluation end within the budget (always, without a budget)."""
-        if self.budget_s is None:
-            return True
-        evaluation = self.evaluation_s if self.evaluation_s is not None else 2.0 * eval_episodes * horizon * self.step_s
-        return self.elapsed() + self.episode_s + evaluation + _FINISH_RESERVE_S <= self.budget_s
+def _budgeted_demonstrations(
+    spec: RunSpec,
+    env: gym.Env[Any, Any],
+    worker: OverlappedCollector | None,
+    budget: Budget,
+    seed: int,
+    on_success: Callable[[int], None] | None,
+) -> list[Episode]:
+    """Demonstrations in chunks (chunk k from seed ``seed + k * attempts``), until done or out of time."""
+    sizes = [min(DEMO_CHUNK, spec.demos - start) for start in range(0, spec.demos, DEMO_CHUNK)]
+    seeds = [seed + k * default_attempts(DEMO_CHUNK) for k in range(len(sizes))]
+    tick = (lambda: on_success(1)) if on_success is not None else None
+    horizon = int(env.spec.max_episode_steps or 50) if env.spec is not None else 50
+    episodes: list[Episode] = []
+    k = 0
+    while k < len(sizes) and budget.preparing_fits():
+        started = time.monotonic()
+        shared = worker is not None and k + 1 < len(sizes)
+        if shared and worker is not None:
+            worker.start_demonstrations(sizes[k + 1], seeds[k + 1])
+        episodes += collect_demos(env, expert_for(spec.task_id), sizes[k], seed=seeds[k], on_success=tick)
+        if shared and worker is not None:
+            there = worker.finish_demonstrations()
+            episodes += there
+            if on_success is not None:
+                on_success(len(there))
+        budget.step_s = (time.monotonic() - started) / (sizes[k] * horizon)
+        k += 2 if shared else 1
+    return episodes
 
 
 class _Logger:
@@ -297,7 +335,7 @@ def train(spec: RunSpec, config: TrainConfig) -> TrainResult:
         env, eval_env = spec.env_wrapper(env), spec.env_wrapper(eval_env)
     collector = OverlappedCollector(task_id, spec.env_wrapper) if spec.overlap else SerialCollector(env)
     try:
-        return _train(spec, config, env, eval_env, collector, _Budget(spec.budget_s, started))
+        return _train(spec, config, env, eval_env, collector, Budget(spec.budget_s, started))
     finally:
         collector.close()
         env.close()
@@ -310,7 +348,7 @@ def _train(
     env: gym.Env[Any, Any],
     eval_env: gym.Env[Any, Any],
     collector: Collector,
-    budget: _Budget,
+    budget: Budget,
 ) -> TrainResult:
     spaces = env_spaces(env)
     dims = Dims(
@@ -326,24 +364,36 @@ def _train(
 
     buffer = EpisodeBuffer(config.buffer_size, horizon, dims.obs, dims.goal, dims.action)
     demo_start = time.monotonic()
-    demos = _demonstrations(spec, env, dims, collector) if config.uses_demos else []
+    demos: list[Episode] = []
+    if config.uses_demos:
+        demo_bar = tqdm(total=spec.demos, desc="demonstrations", unit="ep") if spec.progress and spec.demos else None
+        try:
+            demos = _demonstrations(spec, env, dims, collector, budget, demo_bar.update if demo_bar else None)
+        finally:
+            if demo_bar is not None:
+                demo_bar.close()
     demo_buffer = None
     if demos:
         demo_buffer = EpisodeBuffer(len(demos) * horizon, horizon, dims.obs, dims.goal, dims.action)
         for episode in demos:
             demo_buffer.add(episode)
 
-    start_episode, env_steps = 0, 0
+    start_episode, env_steps, pretrained = 0, 0, 0
     if spec.resume and resume_path.exists():
         agent, start_episode, env_steps = _resume(resume_path, spec, config, env, buffer)
     else:
         agent = make_agent(dims, config, spec.seed)
         for episode in demos:
             agent.observe_episode(episode.obs, episode.achieved_goal, episode.desired_goal)
-        if demo_buffer is not None and config.pretrain_steps > 0:
-            agent.pretrain(demo_buffer, reward_fn, config.pretrain_steps)
+        while demo_buffer is not None and pretrained < config.pretrain_steps:
+            if not budget.preparing_fits():
+                break
+            steps = min(PRETRAIN_CHUNK, config.pretrain_steps - pretrained)
+            agent.pretrain(demo_buffer, reward_fn, steps)
+            pretrained += steps
 
     result = TrainResult(policy_path, resume_path, resumed_from=start_episode)
+    result.demos_used, result.pretrain_steps = len(demos), pretrained
     result.demo_seconds = time.monotonic() - demo_start
     logger = _Logger(out, spec.tensorboard)
     bar = None
@@ -370,7 +420,9 @@ def _train(
     def evaluation(episode: int) -> None:
         """Score the actor, log it, checkpoint; under a budget the policy file keeps the best evaluation."""
         start = time.monotonic()
-        success = evaluate(agent, eval_env, spec.eval_episodes)
+        success, ran = evaluate(agent, eval_env, spec.eval_episodes, budget.out_of_time)
+        if ran < spec.eval_episodes:
+            result.cut_evaluations.append((episode, ran))
         result.success_rates.append((episode, success))
         logger.evaluation(episode, env_steps, agent.updates, success, result.steps_per_second)
         logger.scalars({f"train/{k}": v for k, v in metrics.items()}, env_steps)
@@ -382,7 +434,8 @@ def _train(
         budget.evaluation_s = time.monotonic() - start
         result.eval_seconds += budget.evaluation_s
         if bar is not None:
-            bar.set_postfix(success=f"{success:.2f}", steps_s=f"{result.steps_per_second:.0f}")
+            speed = result.steps_per_second
+            bar.set_postfix(success=f"{success:.2f}", **({"steps_s": f"{speed:.0f}"} if np.isfinite(speed) else {}))
 
     def act_from(first_step: int) -> Callable[[dict[str, np.ndarray]], np.ndarray]:
         """The episode's actions: uniformly random for the first ``random_steps`` of the run, then explored."""
@@ -414,7 +467,10 @@ def _train(
     def reached(episode: int) -> bool:
         """Evaluate; True when the evaluation reaches ``stop_at_success`` (early stopping)."""
         evaluation(episode)
-        result.stopped_early = spec.stop_at_success is not None and result.success_rates[-1][1] >= spec.stop_at_success
+        cut = bool(result.cut_evaluations) and result.cut_evaluations[-1][0] == episode  # too few episodes to tell
+        result.stopped_early = (
+            spec.stop_at_success is not None and not cut and result.success_rates[-1][1] >= spec.stop_at_success
+        )
         return result.stopped_early
 
     done = start_episode
@@ -450,6 +506,7 @@ def _train(
                 bar.update(1)
             if (done % spec.eval_every == 0 or done == spec.episodes) and reached(done):
                 break
+        collector.close()  # no more training episodes: its worker's exit is not left for the end of the budget
         if start_episode >= spec.episodes:
             checkpoint(start_episode)
         elif (

@@ -10,9 +10,10 @@ cross that bound; the free ones solve their reduced system; repeat until the spl
 answer is accepted only when it meets the KKT conditions (free coordinates within their bounds, the
 gradient pointing out of the box at every held one), so it is the QP's solution up to rounding. The
 method is not guaranteed to settle for every ``P``; after a few rounds it gives up and the caller uses
-a general solver (OSQP). For six variables the whole solve is a few hundred floating-point operations,
-less than the cost of one call into a general-purpose QP solver, so it is written out here and compiled
-with Numba (a LAPACK call per reduced system would cost more than its arithmetic).
+a general solver (DAQP, :mod:`psm_control.active_set`). For six variables the whole solve is a few
+hundred floating-point operations, less than the cost of one call into a general-purpose QP solver, so
+it is written out here and compiled with Numba (a LAPACK call per reduced system would cost more than
+its arithmetic).
 """
 
 from __future__ import annotations

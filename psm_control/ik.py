@@ -14,8 +14,10 @@ orientation error costs as much as ``orientation_weight`` metres of position err
 The problem can be built as a ``qpsolvers.Problem`` (inspectable, and carried by the error when it
 fails). Each step is solved exactly by :func:`psm_control.boxqp.solve_box_qp` (the unconstrained
 minimiser, or an active set of joints held at their bounds, checked against the KKT conditions); any
-problem it does not settle goes to an OSQP workspace kept between ticks (:class:`KeptOsqp`, shared
-with the safety filter) and updated in place.
+problem it does not settle goes to the dual active-set solver DAQP (:class:`psm_control.active_set.ActiveSetQp`,
+a workspace kept between ticks), whose answer is exact as well and is checked against the same
+conditions before it is used. With ``naive=True`` every step is rebuilt and solved by OSQP through
+``qpsolvers`` instead (the benchmark's reference).
 """
 
 from __future__ import annotations
@@ -25,21 +27,18 @@ import warnings
 from typing import Any
 
 import numpy as np
-import osqp
 import pinocchio as pin
 import qpsolvers
-from scipy import sparse
 
+from psm_control.active_set import ActiveSetQp
 from psm_control.boxqp import FAILED, solve_box_qp
 from psm_control.errors import InfeasibleProblemError
 from psm_control.reductions import all_of
 from psm_control.robot import PsmConfiguration
 
-__all__ = ["DifferentialIk", "IkResult", "KeptOsqp"]
+__all__ = ["DifferentialIk", "IkResult"]
 
-_SOLVED = ("solved", "solved inaccurate")
-_INFINITY = 1e30  # OSQP_INFTY: bounds beyond it are infinite
-_STATUS = {int(v): k.removeprefix("OSQP_").lower().replace("_", " ") for k, v in osqp.SolverStatus.__members__.items()}
+_SOLVED = ("solved", "solved inaccurate")  # the second only from OSQP, in the naive reference
 
 
 class IkResult:
@@ -82,77 +81,6 @@ class IkResult:
         )
 
 
-class KeptOsqp:
-    """One OSQP workspace with a fixed sparsity pattern: set up on the first solve, then only updated.
-
-    Updates and solves go straight to the compiled solver that ``osqp.OSQP`` wraps when it is there: the
-    wrapper's ``update()`` and ``solve()`` spend about as long in Python (copying every info field into a
-    namespace each call) as the 10-50 ADMM iterations of the control chain's problems take.
-
-    Args:
-        P: Cost matrix pattern (upper triangle, CSC); its values are replaced on every solve that passes ``Px``.
-        A: Constraint matrix pattern (CSC); its values are replaced on every solve that passes ``Ax``.
-        settings: OSQP settings.
-    """
-
-    def __init__(self, P: sparse.csc_matrix, A: sparse.csc_matrix, settings: dict[str, Any]) -> None:
-        self._P = P
-        self._A = A
-        self.settings = settings
-        self._solver: osqp.OSQP | None = None
-        self._direct: Any = None
-
-    def reset(self) -> None:
-        """Drop the workspace: the next solve starts cold, with the initial rho and no warm start.
-
-        OSQP carries its iterates and its adapted rho from one solve to the next; an episode must not
-        depend on the one before it (the same seed gives the same result whatever ran earlier).
-        """
-        self._solver = None
-        self._direct = None
-
-    def solve(
-        self,
-        q: np.ndarray,
-        lower: np.ndarray,
-        upper: np.ndarray,
-        *,
-        Px: np.ndarray | None = None,
-        Ax: np.ndarray | None = None,
-    ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
-        """Return ``(x, y, status, iterations)`` for this call's data (bounds within +-1e30)."""
-        if self._solver is None:
-            P, A = self._P.copy(), self._A.copy()
-            if Px is not None:
-                P.data[:] = Px
-            if Ax is not None:
-                A.data[:] = Ax
-            self._solver = osqp.OSQP()
-            self._solver.setup(P, q, A, lower, upper, **self.settings)
-            direct = getattr(self._solver, "_solver", None)
-            if all(hasattr(direct, name) for name in ("update_data_vec", "update_data_mat", "solve", "info")):
-                self._direct = direct
-        elif self._direct is not None:
-            self._direct.update_data_vec(q=q, l=lower, u=upper)
-            if Px is not None or Ax is not None:
-                self._direct.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
-        else:
-            self._solver.update(
-                q=q,
-                l=lower,
-                u=upper,
-                **({"Px": Px} if Px is not None else {}),
-                **({"Ax": Ax} if Ax is not None else {}),
-            )
-        direct = self._direct
-        if direct is not None:
-            direct.solve()
-            info, solution = direct.info, direct.solution
-            return solution.x, solution.y, _STATUS.get(info.status_val, "failed"), info.iter
-        result = self._solver.solve(raise_error=False)
-        return result.x, result.y, str(result.info.status), int(result.info.iter)
-
-
 class DifferentialIk:
     """Damped, weighted, bounded differential IK on the Pinocchio model.
 
@@ -161,11 +89,11 @@ class DifferentialIk:
         position_weight: Cost weight of position error [1/m^2].
         orientation_weight: Cost weight of orientation error [1/rad^2]; 0.01 makes 0.1 rad cost like 1 cm.
         damping: Levenberg-Marquardt damping on ``dq``; keeps steps bounded near singularities.
-        eps_abs: OSQP absolute tolerance.
-        eps_rel: OSQP relative tolerance.
-        max_iter: OSQP iteration cap.
-        naive: Rebuild the problem and solve it through ``qpsolvers.solve_qp`` every call (the reference
-            the benchmark compares against) instead of updating the kept OSQP workspace.
+        eps_abs: OSQP absolute tolerance (the naive reference only: the exact solvers need none).
+        eps_rel: OSQP relative tolerance (the naive reference only).
+        max_iter: Iteration cap of the solver.
+        naive: Rebuild the problem and solve it by OSQP through ``qpsolvers`` every call (the reference
+            the benchmark compares against) instead of solving it exactly.
     """
 
     def __init__(
@@ -190,18 +118,12 @@ class DifferentialIk:
             "max_iter": max_iter,
             "polishing": False,
             "verbose": False,
-            "warm_starting": True,
             "check_termination": 5,
             "scaling": 0,
         }
         self._damping = damping * np.eye(dof)
         self._sqrt_weights = np.sqrt(self.weights)
-        self._P_upper = np.triu_indices(dof)
-        self._P_order = np.lexsort((self._P_upper[0], self._P_upper[1]))
-        rows, cols = self._P_upper[0][self._P_order], self._P_upper[1][self._P_order]
-        self._Px_index = (rows, cols)  # CSC order of the upper triangle
-        P_pattern = sparse.csc_matrix((np.ones(rows.size), (rows, cols)), shape=(dof, dof))
-        self._qp = KeptOsqp(P_pattern, sparse.identity(dof, format="csc"), self._settings)
+        self._qp = ActiveSetQp(dof, 0, iteration_limit=max_iter)
 
     def errors(self, configuration: PsmConfiguration, goal_local: np.ndarray) -> np.ndarray:
         """Return ``[e_p, e_o]`` (6,): position [m] and orientation [rad] error about the RCM."""
@@ -220,7 +142,7 @@ class DifferentialIk:
         return qpsolvers.Problem(P, q, lb=np.asarray(lower, dtype=float), ub=np.asarray(upper, dtype=float))
 
     def reset(self) -> None:
-        """Forget solver state carried between solves (see :meth:`KeptOsqp.reset`)."""
+        """Forget solver state carried between solves (see :meth:`ActiveSetQp.reset`)."""
         self._qp.reset()
 
     def _cost(self, J: np.ndarray, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -258,7 +180,7 @@ class DifferentialIk:
             )
         status = "solved"
         if self.naive:
-            settings = {k: v for k, v in self._settings.items() if k != "warm_starting"}
+            settings = self._settings
             # solve_problem is what solve_qp wraps; it also says "solved inaccurate", which the kept
             # workspace accepts too, instead of returning None.
             with warnings.catch_warnings():
@@ -269,12 +191,11 @@ class DifferentialIk:
             dq, status = solution.x, str(solution.extras["info"].status)
         else:
             # Solved exactly and directly in the common cases: the unconstrained minimiser within the
-            # bounds, or a few joints held at a bound (psm_control.boxqp); OSQP takes any other case.
+            # bounds, or a few joints held at a bound (psm_control.boxqp); DAQP takes any other case.
             dq = np.empty(self.dof)
             if solve_box_qp(P, b, lower, upper, dq) == FAILED:
-                dq, _, status, _ = self._qp.solve(
-                    -b, np.maximum(lower, -_INFINITY), np.minimum(upper, _INFINITY), Px=P[self._Px_index]
-                )
+                exact = self._qp.solve(P, -b, lower, upper)
+                dq, status = exact.x, exact.status
         if dq is None or status not in _SOLVED or not all_of(np.isfinite(dq)):
             raise InfeasibleProblemError("ik", status, self.problem(configuration, goal_local, lower, upper))
         return IkResult(np.minimum(np.maximum(dq, lower), upper), J, error, self._sqrt_weights)

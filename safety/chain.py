@@ -31,6 +31,7 @@ from psm_control.robot import PsmModel
 from psm_control.urdf import GRASP_FRAME
 from safety.config import SafetyConfig
 from safety.filter import SafetyFilter
+from safety.force_bound import ForceBound
 from safety.force_watch import ForceLimitStallWatch
 from safety.limits import (
     FilterState,
@@ -134,6 +135,7 @@ class ControlChain:
             max_n_per_m=self.config.stiffness_max_n_per_m,
             forgetting=self.config.stiffness_forgetting,
         )
+        self.force_bound = ForceBound.from_config(self.config)
         self.log = SafetyLog(tuple(limit.name for limit in self.limits), self.control_period_s, self.model.dof)
         self.stall_watch = ForceLimitStallWatch(self.config.effective_force_limit_n, self.control_period_s)
         self._goal_local: np.ndarray | None = None
@@ -165,6 +167,7 @@ class ControlChain:
         self._pending_stop = ""
         self._latched = ""
         self.stiffness.reset()
+        self.force_bound.reset()
         self.ik.reset()
         self.filter.reset()
         self.stall_watch.reset()
@@ -307,7 +310,10 @@ class ControlChain:
         tool = self._base.point(self._command_state.local_pose()[:3, 3])
         # The stiffness is learned where the tissue is held: the wrist can move the jaws with the tip still.
         held = self._base.point(self._command_state.frame_pose_local(GRASP_FRAME)[:3, 3])
-        stiffness = self.stiffness.update(held, force)
+        # An inexact force would teach the estimator its own error as stiffness (safety.force_bound).
+        stiffness = self.stiffness.update(held, force) if self.force_bound.exact else self.stiffness.value
+        jaw = min(self._jaw, float(measured.jaw))
+        estimate = self.force_bound.update(jaw, held, force, stiffness)
         interventions: tuple[str, ...] = ()
         events: tuple[dict[str, Any], ...] = ()
         intervened = active = 0
@@ -318,10 +324,12 @@ class ControlChain:
                 tool,
                 self._base.vectors(self._command_state.local_jacobian()[:3]),
                 self._base.vectors(self._command_state.local_jacobian(GRASP_FRAME)[:3]),
-                force,
-                stiffness,
+                estimate.force_n,
+                estimate.stiffness_n_per_m,
                 self.control_period_s,
-                min(self._jaw, float(measured.jaw)),
+                jaw,
+                estimate.margin_n,
+                self.force_bound.holding,
             )
             try:
                 result = self.filter.filter(state, dq_nominal)
@@ -331,16 +339,17 @@ class ControlChain:
             interventions = result.interventions
             intervened = result.intervened_mask
             active = result.active_mask
-            holding = may_hold_tissue(state.jaw_rad, force)
+            holding = state.tissue_held or may_hold_tissue(state.jaw_rad, estimate.force_n, estimate.margin_n)
             grasp_jacobian = state.grasp_jacobian  # the grasp point's motion matters only with tissue held
             stall = self.stall_watch.update(
                 holding=holding,
                 held_back=RetractionForceLimit.name in interventions,
-                force_n=math.sqrt(float(force @ force)),
+                force_n=math.sqrt(float(estimate.force_n @ estimate.force_n)) + estimate.margin_n,
                 asked_m=float(np.linalg.norm(grasp_jacobian @ dq_nominal)) if holding else 0.0,
                 allowed_m=float(np.linalg.norm(grasp_jacobian @ dq)) if holding else 0.0,
-                stiffness_n_per_m=stiffness,
+                stiffness_n_per_m=estimate.stiffness_n_per_m,
                 stamp_s=self._stamp,
+                force_source=estimate.source,
             )
             if stall is not None:
                 events = (stall.to_event(),)

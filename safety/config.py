@@ -133,6 +133,13 @@ class SafetyConfig:
         stiffness_min_n_per_m: Lowest stiffness the force limit will ever assume [N/m].
         stiffness_max_n_per_m: Highest stiffness estimate accepted [N/m].
         stiffness_forgetting: RLS forgetting factor in (0.5, 1].
+        force_sensing_error_n: How far the measured force may be from the true one [N]: 0 for an exact
+            sensor; the force-sensing model's bound for the dVRK's ``measured_cf``, or a wrench
+            calibration's (:mod:`safety.force_bound`). The filter trusts a measurement no further.
+        tissue_stiffness_bound_n_per_m: The stiffest the held tissue can pull back per metre of the grasp
+            point's travel since the grasp [N/m]: keeps the force limit where the measurement cannot.
+        held_load_bound_n: The most the held tissue can load the jaws at the moment of the grasp [N]
+            (its weight, the press of the grasp).
         deadman_timeout_s: Measurements older than this stop the chain [s]; at least
             :data:`DEADMAN_MIN_PERIODS` control periods, since a fresh measurement is already one period
             old when the tick that uses it runs.
@@ -176,6 +183,11 @@ class SafetyConfig:
     stiffness_min_n_per_m: float = 50.0
     stiffness_max_n_per_m: float = 5000.0
     stiffness_forgetting: float = 0.98
+    force_sensing_error_n: float = 0.0
+    # The task flap's: 3 x E t at its stiffest default (14 kPa, 3 mm); sim.force_sensing.tissue_bounds.
+    tissue_stiffness_bound_n_per_m: float = 126.0
+    # The task flap's weight at its largest default size, density and thickness (0.27 N), rounded up.
+    held_load_bound_n: float = 0.3
     deadman_timeout_s: float = 0.05
     max_translation_m: float = 0.05
     max_yaw_rad: float = 0.5
@@ -305,6 +317,11 @@ class SafetyConfig:
             )
         if not (_is_number(self.stiffness_forgetting) and 0.5 < self.stiffness_forgetting <= 1.0):
             raise ConfigurationError("stiffness_forgetting", self.stiffness_forgetting, "a number in (0.5, 1]")
+        if not (_is_number(self.force_sensing_error_n) and 0.0 <= self.force_sensing_error_n <= 100.0):
+            raise ConfigurationError("force_sensing_error_n", self.force_sensing_error_n, "a number in [0, 100] N")
+        _positive("tissue_stiffness_bound_n_per_m", self.tissue_stiffness_bound_n_per_m, 1e5, lower=1.0)
+        if not (_is_number(self.held_load_bound_n) and 0.0 <= self.held_load_bound_n <= 50.0):
+            raise ConfigurationError("held_load_bound_n", self.held_load_bound_n, "a number in [0, 50] N")
         _positive("deadman_timeout_s", self.deadman_timeout_s, 1.0)
         if self.deadman_timeout_s < DEADMAN_MIN_PERIODS * self.control_period_s * (1.0 - 1e-9):
             raise ConfigurationError(

@@ -9,17 +9,25 @@ velocity, insertion, acceleration; ``Limit.joint_bounds``) are merged into one p
 the tightest of them, so the solver sees one row per joint instead of one per rule. Every other limit
 keeps its own rows; a soft one gets one slack ``sigma_i``. Each such limit's rows are divided by
 ``c_i``, the largest row norm of ``G_i S`` this tick, so every row and every slack has unit magnitude
-whatever its physical unit (metres, newtons): ADMM converges in tens of iterations instead of thousands,
-and the penalty ``rho`` needs to exceed only the (bounded) multiplier of a unit row to be exact.
+whatever its physical unit (metres, newtons): a violation or a tolerance means the same for every row,
+the solvers work on well-scaled data, and the penalty ``rho`` needs to exceed only the (bounded)
+multiplier of a unit row to be exact.
 
-The problem keeps one size and sparsity pattern, so one OSQP workspace is set up once and only
-``update()``d each tick. A nominal command whose clip to the bounds already meets every other row is
-returned without a solve (the bounds are a box and the cost is separable, so the clip is optimal). When
-the clip violates exactly one row, the projection onto the bounds and that row is computed exactly
-(:mod:`safety.halfspace`) and kept if it meets every other row within the row's slack penalty; OSQP
-solves every other case. The per-tick arithmetic is in :mod:`safety.filter_kernels`. After
-a solve ``z`` is clipped to the bounds (exact, whatever the solver's tolerance) and every hard row is
-re-checked: a violation above the tolerance raises, never passes.
+A nominal command whose clip to the bounds already meets every other row is returned without a solve
+(the bounds are a box and the cost is separable, so the clip is optimal). When the clip violates a
+row, the projection onto the bounds and the first such row is computed exactly (:mod:`safety.halfspace`)
+and kept if it meets every other row and its multiplier is within the row's slack penalty (the KKT
+conditions of the whole problem). Every other case, typically a pull against an edge of the force
+polytope where two or three of its planes hold at once, is solved by a dual active-set method
+(:class:`psm_control.active_set.ActiveSetQp`, DAQP) whose workspace keeps one size and is only updated
+each tick; its answer is the QP's solution up to rounding, and it is used only after it meets the KKT
+conditions to :data:`KKT_TOLERANCE`. The per-tick arithmetic is in :mod:`safety.filter_kernels`. After a
+solve ``z`` is clipped to the bounds and every hard row is re-checked: a violation above the tolerance
+raises, never passes. :attr:`SafetyFilter.paths` counts how each tick was solved and the worst row any
+answer left violated (``tissue-retract bench chain`` prints them).
+
+With ``naive=True`` the filter is the benchmark's reference instead: every tick the QP is rebuilt and
+solved through ``qpsolvers`` by OSQP, with no shortcut and no kept workspace.
 """
 
 from __future__ import annotations
@@ -27,25 +35,34 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 import qpsolvers
-from scipy import sparse
 
+from psm_control.active_set import ActiveSetQp
 from psm_control.errors import InfeasibleProblemError
-from psm_control.ik import KeptOsqp
 from psm_control.reductions import all_of, any_of
-from safety.filter_kernels import assess, clip_and_count_violations, merge_bounds, normalise_rows
+from safety.filter_kernels import (
+    assess,
+    clip_and_count_violations,
+    merge_bounds,
+    normalise_rows,
+    solver_rows,
+    worst_row_violation,
+)
 from safety.halfspace import project_onto_box_and_halfspace
 from safety.limits import FilterState, Limit, LimitReport
 
-__all__ = ["FilterResult", "SafetyFilter"]
+__all__ = ["KKT_TOLERANCE", "FilterResult", "SafetyFilter", "SolvePaths"]
 
-_INFINITY = 1e30  # OSQP's OSQP_INFTY: bounds beyond it are infinite
-_SOLVED = ("solved", "solved inaccurate")
-#: Violated rows tried one by one for an exact projection before OSQP solves the whole QP.
-_PROJECTION_TRIES = 3
+_INFINITY = 1e30  # DAQP's and OSQP's infinity: bounds beyond it are infinite
+_SOLVED = ("solved", "solved inaccurate")  # the second only from OSQP, in the naive reference
+#: Largest KKT residual accepted from the active-set solver: a row (normalised to unit norm, in units of
+#: the joints' steps) violated by more than this, or a multiplier that does not balance the cost's
+#: gradient to this relative precision, is a failed solve.
+KKT_TOLERANCE = 1e-9
 
 
 class _Reports:
@@ -90,7 +107,8 @@ class FilterResult(NamedTuple):
         dq: The safe displacement (6,).
         solved: Whether a QP was solved (False: the nominal command was already safe).
         change: ``||dq - dq_nom||`` in the filter's normalised joint metric.
-        iterations: OSQP iterations of this tick's solve (0 without a solve).
+        iterations: Iterations of this tick's solver (active-set iterations; OSQP's in the naive reference;
+            0 without a solve).
         active_mask: Bit ``i`` set when limit ``i`` (the filter's order) was active at ``dq``.
         intervened_mask: Bit ``i`` set when the nominal command violated limit ``i``.
         interventions: Names of the limits the nominal command violated.
@@ -111,6 +129,31 @@ class FilterResult(NamedTuple):
         return self.detail.build()
 
 
+@dataclass
+class SolvePaths:
+    """How the filter's ticks were solved since it was made, and the worst row any answer left violated.
+
+    Attributes:
+        solver_name: The general QP solver.
+        ticks: Ticks filtered.
+        clipped: Ticks whose nominal command, clipped to the joint bounds, met every other row (no solve).
+        projected: Ticks solved by the exact projection onto the bounds and one row.
+        solver: Ticks solved by the general QP solver.
+        worst_row_violation: Largest ``a . z - sigma - b`` over every bound and row of every answer, in the
+            filter's normalised units (each row of unit norm, each joint in units of its step); <= 0 when
+            every row held exactly.
+        over_tolerance: Ticks whose answer left a bound or row violated by more than :data:`KKT_TOLERANCE`.
+    """
+
+    solver_name: str
+    ticks: int = 0
+    clipped: int = 0
+    projected: int = 0
+    solver: int = 0
+    worst_row_violation: float = -math.inf
+    over_tolerance: int = 0
+
+
 class SafetyFilter:
     """Project a nominal joint displacement onto the set the limits allow.
 
@@ -119,8 +162,10 @@ class SafetyFilter:
         step_scale: Per-joint normalisation (6,), typically the largest step; ``W = diag(1/step^2)``.
         slack_penalty: ``rho``, the penalty on a soft limit's normalised slack (one unit of slack is a
             violation as large as the limit's largest row moves in one full step).
-        eps: OSQP absolute and relative tolerance (of the normalised rows).
-        max_iter: OSQP iteration cap; a solve that does not converge within it raises.
+        eps: OSQP absolute and relative tolerance of the naive reference (of the normalised rows); the
+            active-set solver needs none: its answer is exact up to rounding and checked to
+            :data:`KKT_TOLERANCE`.
+        max_iter: Iteration cap of the solver; a solve that does not finish within it raises.
         hard_tolerance: Largest accepted violation of a hard row after the solve.
         naive: Rebuild the QP and solve it with ``qpsolvers.solve_qp`` every tick, with no shortcut
             (the benchmark's reference).
@@ -174,35 +219,33 @@ class SafetyFilter:
         self._norm = np.ones(len(self._rowed))
         self._row_norm = np.ones(self.m_rows)
         self._penalty = np.array([slack_penalty * self.limits[i].penalty_scale for i in self._soft])
-        # OSQP data: x = [z, sigma]; rows [z bounds; sigma >= 0; normalised rows of the other limits].
-        first = dof + self.n_slack
-        self._first_row = first
-        self._m = first + self.m_rows
-        self._l = np.full(self._m, -_INFINITY)
-        self._u = np.full(self._m, _INFINITY)
-        self._l[dof:first] = 0.0
-        self._q = np.concatenate([np.zeros(dof), self._penalty])
+        # The QP in x = [z, sigma]: bounds [lb, 0] <= x <= [ub, inf]; rows (G S / c) z - sigma <= h / c.
         self._P_diag = np.concatenate([np.ones(dof), self._penalty])
-        self._A_pattern, self._Ax, self._G_pos = self._pattern(self.n_slack)
-        hard_pattern, self._hard_Ax, self._hard_G_pos = self._pattern(0)
-        self._hard_l = np.full(dof + self.m_rows, -_INFINITY)
-        self._hard_u = np.full(dof + self.m_rows, _INFINITY)
+        self._H = np.diag(self._P_diag)
+        self._f = np.concatenate([np.zeros(dof), self._penalty])
+        self._lower = np.concatenate([np.zeros(dof), np.zeros(self.n_slack)])
+        self._upper = np.concatenate([np.zeros(dof), np.full(self.n_slack, _INFINITY)])
+        self._A = np.zeros((self.m_rows, self.n))
+        soft_rows = np.flatnonzero(self._row_slack >= 0)
+        self._A[soft_rows, dof + self._row_slack[soft_rows]] = -1.0
+        self._row_lower = np.full(self.m_rows, -_INFINITY)
+        self._row_upper = np.full(self.m_rows, _INFINITY)
         # A hard row's multiplier may be anything; a soft row's must stay within its slack's penalty.
         self._row_penalty = np.where(self._row_slack >= 0, np.r_[self._penalty, 0.0][self._row_slack], np.inf)
+        self._qp = ActiveSetQp(self.n, self.m_rows, iteration_limit=max_iter, kkt_tolerance=KKT_TOLERANCE)
+        # OSQP's settings, for the naive reference only.
         self._settings: dict[str, Any] = {
             "eps_abs": eps,
             "eps_rel": eps,
             "max_iter": max_iter,
             "polishing": False,
             "verbose": False,
-            "warm_starting": True,
             "scaling": 0,
             "rho": 1.0,
             "adaptive_rho_interval": 10,
             "check_termination": 5,
         }
-        self._hard = KeptOsqp(sparse.identity(dof, format="csc"), hard_pattern, self._settings)
-        self._slack = KeptOsqp(sparse.diags(self._P_diag, format="csc"), self._A_pattern, self._settings)
+        self.paths = SolvePaths(solver_name="OSQP" if naive else "DAQP")
         self._iterations = 0
         self._names = tuple(limit.name for limit in self.limits)
         self._report_order = np.argsort(np.array(self._bound + self._rowed, dtype=np.intp))
@@ -215,46 +258,13 @@ class SafetyFilter:
         # Bit of each column of the (bound limits, then the others) order: limit i is bit i.
         self._bit_values = np.array([1 << i for i in self._bound + self._rowed], dtype=np.int64)
         self._mask_names: dict[int, tuple[str, ...]] = {}
-        self._q_z = self._q[:dof]
-        self._hard_l_z = self._hard_l[:dof]
-        self._hard_u_z = self._hard_u[:dof]
-        self._hard_u_rows = self._hard_u[dof:]
         self._zero_slack = np.zeros(self.n_slack)
         self._zero_slack.flags.writeable = False
+        self._no_sigma = np.zeros(self.n_slack)
 
     def reset(self) -> None:
         """Forget solver state carried between solves, so a new episode starts from the same state."""
-        self._hard.reset()
-        self._slack.reset()
-
-    def _pattern(self, n_slack: int) -> tuple[sparse.csc_matrix, np.ndarray, np.ndarray]:
-        """The fixed CSC pattern of ``A``, its constant values, and where the ``G S`` block's entries go."""
-        dof = self.dof
-        first = dof + n_slack
-        m, n = first + self.m_rows, dof + n_slack
-        rows = list(range(first))
-        cols = list(range(first))
-        values = [1.0] * first
-        g_rows = np.repeat(np.arange(self.m_rows), dof)
-        g_cols = np.tile(np.arange(dof), self.m_rows)
-        rows += (first + g_rows).tolist()
-        cols += g_cols.tolist()
-        values += [0.0] * g_rows.size
-        soft_rows = np.flatnonzero(self._row_slack >= 0) if n_slack else np.zeros(0, dtype=np.intp)
-        rows += (first + soft_rows).tolist()
-        cols += (dof + self._row_slack[soft_rows]).tolist()
-        values += [-1.0] * soft_rows.size
-        # Number every entry, build the CSC matrix, and read back where each entry landed.
-        tag = sparse.csc_matrix((np.arange(1, len(rows) + 1, dtype=float), (rows, cols)), shape=(m, n))
-        tag.sort_indices()
-        where = np.empty(len(rows), dtype=np.intp)
-        where[tag.data.astype(np.intp) - 1] = np.arange(len(rows))
-        Ax = np.zeros(len(rows))
-        Ax[where] = values
-        pattern = tag.copy()
-        pattern.data[:] = Ax
-        # G S is filled row-major (row r, column j) -> entry first + r * dof + j.
-        return pattern, Ax, where[first : first + g_rows.size]
+        self._qp.reset()
 
     # -- assembly -----------------------------------------------------------------------------------
 
@@ -278,7 +288,7 @@ class SafetyFilter:
         return self._problem(np.asarray(dq_nominal, dtype=float))
 
     def _problem(self, dq_nominal: np.ndarray) -> qpsolvers.Problem:
-        q = self._q.copy()
+        q = self._f.copy()
         q[: self.dof] = -dq_nominal / self._scale
         h = self._h / self._row_norm
         finite = np.isfinite(h)
@@ -309,17 +319,8 @@ class SafetyFilter:
         self._iterations = 0
         projected = None
         if violated and not self.naive:
+            # One try: when it fails the active-set solver is exact and costs about as much as two more.
             projected = self._project_one_row(first_violated, z_nominal)
-            if projected is None and violated > 1:
-                # Several rows violated, often nearly parallel ones (the force limit's planes about the
-                # force): the projection onto the most violated may still meet all the others, and then
-                # it is the QP's solution as well (the feasible set lies within that row's half-space).
-                excess = self._G @ z - self._h
-                for row in np.argsort(-excess)[:_PROJECTION_TRIES].tolist():
-                    if row != first_violated and excess[row] > 0.0:
-                        projected = self._project_one_row(row, z_nominal)
-                        if projected is not None:
-                            break
         if projected is not None:
             z = projected
             solved = True
@@ -336,6 +337,7 @@ class SafetyFilter:
             if slack is not self._zero_slack:
                 sigma = np.maximum(slack, 0.0)
             solved = True
+        self._count(projected is not None, solved, z, sigma)
         dq = z * self._scale
         active, intervened, detail = self._reports(dq_nominal, dq, z_nominal, z, sigma)
         change = z - z_nominal
@@ -349,6 +351,23 @@ class SafetyFilter:
             self._interventions(intervened),
             detail,
         )
+
+    def _count(self, projected: bool, solved: bool, z: np.ndarray, sigma: np.ndarray) -> None:
+        paths = self.paths
+        paths.ticks += 1
+        if projected:
+            paths.projected += 1
+        elif solved:
+            paths.solver += 1
+        else:
+            paths.clipped += 1
+        if sigma is self._zero_slack:
+            sigma = self._no_sigma  # the same zeros, writable: one compiled signature for the kernel
+        violation = worst_row_violation(self._G, self._h, self._row_norm, self._row_slack, sigma, z, self._lb, self._ub)
+        if not violation <= paths.worst_row_violation:
+            paths.worst_row_violation = violation
+        if not violation <= KKT_TOLERANCE:
+            paths.over_tolerance += 1
 
     def _interventions(self, mask: int) -> tuple[str, ...]:
         names = self._mask_names.get(mask)
@@ -393,11 +412,12 @@ class SafetyFilter:
     # -- solvers ------------------------------------------------------------------------------------
 
     def _project_one_row(self, row: int, z_nominal: np.ndarray) -> np.ndarray | None:
-        """The exact solution when only ``row`` is violated at the clipped nominal, or None for OSQP.
+        """The exact solution when only ``row`` is violated at the clipped nominal, or None for the solver.
 
         It is the QP's solution if the projection onto the bounds and that one row meets every other row
         and the row's multiplier stays within its slack penalty (so the penalised problem would not
-        take slack either); otherwise OSQP solves the whole problem.
+        take slack either): these are the whole problem's KKT conditions. Otherwise the active-set solver
+        solves the whole problem.
         """
         norm = self._row_norm[row]
         z = np.empty(self.dof)
@@ -411,56 +431,45 @@ class SafetyFilter:
         return None if any_of(excess > 0.0) else z
 
     def _solve(self, z_nominal: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, str]:
-        """Solve this tick's QP: without slack first, with it only when that does not settle it.
+        """Solve this tick's QP: ``(z, sigma, status)``; ``sigma`` is the shared zero vector without slack."""
+        u_rows = self._row_upper
+        solver_rows(self._G, self._h, self._row_norm, self._lb, self._ub, _INFINITY, self._A, u_rows)
+        if self.naive:
+            return self._solve_naive(z_nominal, self._A[:, : self.dof].copy(), u_rows.copy())
+        dof = self.dof
+        np.negative(z_nominal, out=self._f[:dof])
+        self._lower[:dof] = self._lb
+        self._upper[:dof] = self._ub
+        solution = self._qp.solve(
+            self._H, self._f, self._lower, self._upper, self._A, self._row_lower, u_rows, new_H=False
+        )
+        self._iterations = solution.iterations
+        x = solution.x
+        if x is None:
+            return None, self._zero_slack, solution.status
+        sigma = x[dof:]
+        return x[:dof], sigma if sigma.any() else self._zero_slack, solution.status
 
-        Returns ``(z, sigma, status)``; ``sigma`` is the shared zero vector when no slack was needed.
-        """
-        row_norm = self._row_norm
-        rows = np.divide(self._G, row_norm[:, None], out=self._rows)
-        h = self._h / row_norm
-        # A row no displacement within the bounds can violate is left out (u = inf): same solution,
-        # fewer active candidates for the solver.
-        lb, ub = self._lb, self._ub
-        reach = np.abs(rows) @ np.maximum(np.abs(lb), np.abs(ub))
-        u_rows = np.where(reach > h, np.minimum(h, _INFINITY), _INFINITY)
-        lb = np.maximum(lb, -_INFINITY)
-        ub = np.minimum(ub, _INFINITY)
-        np.negative(z_nominal, out=self._q_z)
+    def _solve_naive(
+        self, z_nominal: np.ndarray, rows: np.ndarray, u_rows: np.ndarray
+    ) -> tuple[np.ndarray | None, np.ndarray, str]:
+        """The reference: without slack first, with it only when that does not settle it, each rebuilt for OSQP."""
+        lb = np.maximum(self._lb, -_INFINITY)
+        ub = np.minimum(self._ub, _INFINITY)
         # If the rows can all be met and no soft row's multiplier exceeds its penalty, the slack-free
         # solution is exactly the penalised problem's (slack zero), and ADMM converges fast on it.
-        x, y_rows, status, iterations = self._stage(False, lb, ub, rows, u_rows)
+        x, y_rows, status, iterations = self._stage_naive(False, z_nominal, lb, ub, rows, u_rows)
         self._iterations = iterations
         if status in _SOLVED and x is not None and not any_of(y_rows > self._row_penalty):
             return x, self._zero_slack, status
-        x, _, status, iterations = self._stage(True, lb, ub, rows, u_rows)
+        x, _, status, iterations = self._stage_naive(True, z_nominal, lb, ub, rows, u_rows)
         self._iterations += iterations
         if x is None:
             return None, self._zero_slack, status
         return x[: self.dof], x[self.dof :], status
 
-    def _stage(
-        self, slack: bool, lb: np.ndarray, ub: np.ndarray, rows: np.ndarray, u_rows: np.ndarray
-    ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
-        """One QP: ``(x, row multipliers, status, iterations)``, kept workspace or rebuilt (naive)."""
-        if self.naive:
-            return self._stage_naive(slack, lb, ub, rows, u_rows)
-        if not slack:
-            self._hard_l_z[:] = lb
-            self._hard_u_z[:] = ub
-            self._hard_u_rows[:] = u_rows
-            self._hard_Ax[self._hard_G_pos] = rows.ravel()
-            x, y, status, iterations = self._hard.solve(self._q_z, self._hard_l, self._hard_u, Ax=self._hard_Ax)
-            return x, y[self.dof :], status, iterations
-        dof, first = self.dof, self._first_row
-        self._l[:dof] = lb
-        self._u[:dof] = ub
-        self._u[first:] = u_rows
-        self._Ax[self._G_pos] = rows.ravel()
-        x, y, status, iterations = self._slack.solve(self._q, self._l, self._u, Ax=self._Ax)
-        return x, y[first:], status, iterations
-
     def _stage_naive(
-        self, slack: bool, lb: np.ndarray, ub: np.ndarray, rows: np.ndarray, u_rows: np.ndarray
+        self, slack: bool, z_nominal: np.ndarray, lb: np.ndarray, ub: np.ndarray, rows: np.ndarray, u_rows: np.ndarray
     ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
         """The same QP rebuilt and solved from scratch through qpsolvers (``solve_qp`` returns only ``x``;
         ``solve_problem``, which it wraps, also gives the multipliers and the solver's status)."""
@@ -471,13 +480,13 @@ class SafetyFilter:
         if slack:
             soft = np.flatnonzero(self._row_slack >= 0)
             G[soft, self.dof + self._row_slack[soft]] = -1.0
-            P = np.diag(self._P_diag)
-            q = self._q
+            P = self._H
+            q = np.concatenate([-z_nominal, self._penalty])
             lb = np.concatenate([lb, np.zeros(self.n_slack)])
             ub = np.concatenate([ub, np.full(self.n_slack, np.inf)])
         else:
-            P, q = np.eye(self.dof), self._q[: self.dof]
-        settings = {k: v for k, v in self._settings.items() if k != "warm_starting"}
+            P, q = np.eye(self.dof), -z_nominal
+        settings = self._settings
         problem = qpsolvers.Problem(
             P, q, G[live] if live.any() else None, u_rows[live] if live.any() else None, lb=lb, ub=ub
         )

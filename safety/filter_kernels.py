@@ -13,7 +13,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["assess", "clip_and_count_violations", "merge_bounds", "normalise_rows"]
+__all__ = [
+    "assess",
+    "clip_and_count_violations",
+    "merge_bounds",
+    "normalise_rows",
+    "solver_rows",
+    "worst_row_violation",
+]
 
 _MIN_ROW_NORM = 1e-9
 
@@ -160,6 +167,61 @@ def assess(
     return bound_excess, hard_excess, active, intervened
 
 
+@numba.njit(cache=True)
+def solver_rows(
+    G: np.ndarray,
+    h: np.ndarray,
+    row_norm: np.ndarray,
+    lb: np.ndarray,
+    ub: np.ndarray,
+    infinity: float,
+    A: np.ndarray,
+    row_upper: np.ndarray,
+) -> None:
+    """The rows as the solver takes them: ``G / row_norm`` into ``A``'s first columns, ``h / row_norm`` into
+    ``row_upper``, or ``infinity`` for a row that no ``z`` within ``lb <= z <= ub`` can violate (the same
+    solution with fewer candidates for the active set)."""
+    for r in range(G.shape[0]):
+        reach = 0.0
+        for j in range(G.shape[1]):
+            a = G[r, j] / row_norm[r]
+            A[r, j] = a
+            reach += abs(a) * max(abs(lb[j]), abs(ub[j]))
+        offset = h[r] / row_norm[r]
+        row_upper[r] = min(offset, infinity) if reach > offset else infinity
+
+
+@numba.njit(cache=True)
+def worst_row_violation(
+    G: np.ndarray,
+    h: np.ndarray,
+    row_norm: np.ndarray,
+    row_slack: np.ndarray,
+    sigma: np.ndarray,
+    z: np.ndarray,
+    lb: np.ndarray,
+    ub: np.ndarray,
+) -> float:
+    """The largest violation of a bound or a row by ``z`` and the slack ``sigma``, in normalised units.
+
+    Row ``r`` is ``G[r] z / row_norm[r] - sigma[row_slack[r]] <= h[r] / row_norm[r]`` (no slack where
+    ``row_slack[r]`` is negative); the result is <= 0 when every bound and row holds.
+    """
+    worst = -np.inf
+    for j in range(z.size):
+        worst = max(worst, lb[j] - z[j], z[j] - ub[j])
+    for r in range(G.shape[0]):
+        value = -h[r]
+        for j in range(z.size):
+            value += G[r, j] * z[j]
+        value /= row_norm[r]
+        if row_slack[r] >= 0:
+            value -= sigma[row_slack[r]]
+        if not value <= worst:  # also NaN
+            worst = value
+    return worst
+
+
 def _compile() -> None:
     """Compile (or load from Numba's cache) for the filter's argument types now, at import, so that no
     control tick ever waits for the compiler."""
@@ -175,6 +237,8 @@ def _compile() -> None:
         lower, upper, vector, vector, G, h, z, vector, starts, np.ones(rows, dtype=np.bool_),
         np.ones(limits, dtype=np.int64), 0.0, np.zeros((2, limits)),
     )  # fmt: skip
+    worst_row_violation(G, h, np.ones(rows), np.zeros(rows, dtype=np.intp), np.zeros(1), z, vector, vector)
+    solver_rows(G, h, np.ones(rows), vector, vector, 1e30, np.zeros((rows, dof + 1)), np.zeros(rows))
 
 
 _compile()

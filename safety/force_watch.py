@@ -133,8 +133,9 @@ class ForceLimitWatch:
 
 #: A retraction the limit slows below this is stalled [m/s]: measured on the tasks (expert, 1 s windows
 #: after the grasp) the grasp point moved at 11-18 mm/s under limits of 0.05 and 0.1 N, where the
-#: retraction never finished, and at 34-39 mm/s under the nerve preset's 0.4 N, where it did.
-STALL_SPEED_M_S = 0.025
+#: retraction never finished, and at 25-39 mm/s under the nerve preset's 0.4 N, where it did (25.0 mm/s:
+#: Lift, seed 901, since the flap's mesh is scaled at load). 20 mm/s lies between the two.
+STALL_SPEED_M_S = 0.020
 
 
 @dataclass(frozen=True)
@@ -151,6 +152,9 @@ class ForceLimitStall:
         speed_m_s: The grasp point's mean speed over the window, as the filter let it move [m/s].
         asked_speed_m_s: The mean speed the policy asked for [m/s].
         stiffness_n_per_m: The tissue stiffness the filter assumed at the window's last tick [N/m].
+        force_source: What the load is from: ``measured`` (the force sensor, with its error bound as
+            margin) or ``travel`` (the bound from the grasp point's travel, where the sensing cannot tell
+            the limit: :mod:`safety.force_bound`).
     """
 
     start_s: float
@@ -161,6 +165,7 @@ class ForceLimitStall:
     speed_m_s: float
     asked_speed_m_s: float
     stiffness_n_per_m: float
+    force_source: str = "measured"
 
     def to_event(self) -> dict[str, Any]:
         """The ``force_limit_stall`` event, JSON-ready, with the warning for the user as ``text``."""
@@ -169,6 +174,16 @@ class ForceLimitStall:
     def warning(self) -> str:
         """The warning for the user: what happened, what it means, what to change."""
         left_n = max(0.0, self.limit_n - self.static_load_n)
+        if self.force_source == "travel":
+            return (
+                f"force limit {self.limit_n:g} N stalls the retraction: the force sensing cannot tell the limit, so "
+                f"the filter bounds the force from the grasp point's travel since the grasp, and that bound reached "
+                f"{self.static_load_n:.3f} N ({100 * self.static_load_n / self.limit_n:.0f} % of the limit) at "
+                f"{self.stiffness_n_per_m:.0f} N/m; for {self.duration_s:.1f} s it held the tool to "
+                f"{1000 * self.speed_m_s:.0f} mm/s (the policy asked for {1000 * self.asked_speed_m_s:.0f}). Calibrate "
+                "the force sensing (calibrate-wrench), declare a softer tissue (tissue_stiffness_bound_n_per_m) if it "
+                "is, or raise force_limit_n (--safety-config) if the tissue allows it"
+            )
         return (
             f"force limit {self.limit_n:g} N stalls the retraction: for {self.duration_s:.1f} s with tissue in "
             f"the jaws the safety filter held it to {1000 * self.speed_m_s:.0f} mm/s (the policy asked for "
@@ -233,6 +248,7 @@ class ForceLimitStallWatch:
         allowed_m: float,
         stiffness_n_per_m: float,
         stamp_s: float,
+        force_source: str = "measured",
     ) -> ForceLimitStall | None:
         """Take one tick; return the stall on the tick it is first seen (at most once until :meth:`reset`).
 
@@ -244,6 +260,7 @@ class ForceLimitStallWatch:
             allowed_m: How far the filtered step moves it [m].
             stiffness_n_per_m: The tissue stiffness the filter assumes this tick [N/m].
             stamp_s: The tick's time [s].
+            force_source: What ``force_n`` is from (:class:`ForceLimitStall`).
         """
         counted = bool(holding and held_back and math.isfinite(force_n))
         if len(self._window) == self._size:
@@ -267,5 +284,6 @@ class ForceLimitStallWatch:
             speed_m_s=allowed / self._duration_s,
             asked_speed_m_s=sum(entry[3] for entry in self._window) / self._duration_s,
             stiffness_n_per_m=float(stiffness_n_per_m),
+            force_source=force_source,
         )
         return self.stall

@@ -7,11 +7,10 @@ limit, or the tip approaching one face of the workspace box). For that case the 
 solution in closed form, ``z(lam) = clip(p - lam a, lower, upper)`` with the row's multiplier ``lam >= 0``
 chosen so that ``a . z(lam) = b``. ``a . z(lam)`` is continuous, non-increasing and linear between the
 values of ``lam`` where a coordinate leaves or reaches a bound, so ``lam`` is found exactly by walking
-those breakpoints in order and solving within the one segment where the row is met. OSQP reaches the
-same point only to its tolerance, takes tens to thousands of iterations when the active row changes
-between ticks, and costs more per call than this whole function (compiled with Numba: a few dozen
-floating-point operations, where NumPy's per-call overhead would dominate); the filter uses OSQP for
-everything this does not cover.
+those breakpoints in order and solving within the one segment where the row is met. A call into a
+general QP solver costs more than this whole function (compiled with Numba: a few dozen floating-point
+operations, where NumPy's per-call overhead would dominate); the filter uses the active-set solver
+(:mod:`psm_control.active_set`) for everything this does not cover.
 """
 
 from __future__ import annotations

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from psm_control.errors import ConfigurationError, TissueRetractError
+from sim.success_interval import wilson_interval
 
 __all__ = [
     "FAILURE_CLASSES",
@@ -37,6 +38,7 @@ __all__ = [
     "failure_class",
     "force_limit_summary",
     "run_episode",
+    "site_error_summary",
     "summarize",
 ]
 
@@ -95,7 +97,7 @@ class EpisodeResult:
     seed: int
     success: bool
     steps: int
-    peak_force_n: float
+    peak_force_n: float  # the true tissue force; peak_measured_force_n is what the safety filter saw
     failure_class: str
     grip_losses: int
     tissue_damage: bool
@@ -108,9 +110,12 @@ class EpisodeResult:
     safety_stops: int
     interventions: int
     invalid_actions: int = 0
+    peak_measured_force_n: float = 0.0
     force_limit_n: float = float("nan")
     force_limit_exceeded: list[dict[str, Any]] = field(default_factory=list)
     force_limit_stall: list[dict[str, Any]] = field(default_factory=list)
+    #: Distance of the site the policy observed at the start to the true site [mm] (None: the truth itself).
+    site_error_mm: float | None = None
 
     @property
     def force_over_limit_s(self) -> float:
@@ -135,6 +140,7 @@ def run_episode(
     minimum_insertion = model.spec.rcm.min_insertion_m
     observation, info = env.reset(seed=seed, options=options)
     check_start_inside_workspace(env, float(info["workspace_violation_m"]))
+    site_error_mm = float(info["site_error_mm"]) if "site_error_mm" in info else None
     _call_policy(reset, seed, 0)
     counts = dict.fromkeys(_SEVERITY, 0)
     peak, steps, violations, stops, interventions = 0.0, 0, 0, 0, 0
@@ -174,9 +180,11 @@ def run_episode(
         safety_stops=stops,
         interventions=interventions,
         invalid_actions=counts["invalid_action"],
+        peak_measured_force_n=float(info["measured_force_peak_n"]),
         force_limit_n=float(info["force_limit_n"]),
         force_limit_exceeded=list(info["force_limit_exceeded"]),
         force_limit_stall=list(info["force_limit_stall"]),
+        site_error_mm=site_error_mm,
     )
 
 
@@ -195,18 +203,20 @@ def check_start_inside_workspace(env: Any, outside_m: float) -> None:
 
 
 def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, Any]:
-    """The JSON ``summary``: success rate with a 95 % normal-approximation half-width, forces, events."""
+    """The JSON ``summary``: success rate with its 95 % Wilson interval (``ci95``: [low, high]), forces, events."""
     n = len(results)
     if n == 0:
         raise ConfigurationError("episodes", 0, "at least one episode")
-    rate = float(np.mean([r.success for r in results]))
+    successes = sum(bool(r.success) for r in results)
     steps = sum(r.steps for r in results)
     return {
-        "success_rate": rate,
-        "ci95": float(1.96 * np.sqrt(rate * (1.0 - rate) / n)),
+        "success_rate": successes / n,
+        "successes": successes,
+        "ci95": list(wilson_interval(successes, n)),
         "episodes": n,
         "peak_force_n": float(max(r.peak_force_n for r in results)),
         "mean_peak_force_n": float(np.mean([r.peak_force_n for r in results])),
+        "peak_measured_force_n": float(max(r.peak_measured_force_n for r in results)),
         "grip_losses": int(sum(r.grip_losses for r in results)),
         "tissue_damage": int(sum(r.tissue_damage for r in results)),
         "sim_unstable": int(sum(r.sim_unstable for r in results)),
@@ -219,6 +229,22 @@ def summarize(results: Sequence[EpisodeResult], elapsed_s: float) -> dict[str, A
         "invalid_actions": int(sum(r.invalid_actions for r in results)),
         "interventions": int(sum(r.interventions for r in results)),
         **force_limit_summary([r.to_dict() for r in results]),
+        **site_error_summary(results),
+    }
+
+
+def site_error_summary(results: Sequence[EpisodeResult]) -> dict[str, Any]:
+    """``site_error_mm`` (median, p95, max over the episodes) where the observed site was an estimate."""
+    errors = [r.site_error_mm for r in results if r.site_error_mm is not None]
+    if not errors:
+        return {}
+    values = np.asarray(errors)
+    return {
+        "site_error_mm": {
+            "median": float(np.median(values)),
+            "p95": float(np.percentile(values, 95)),
+            "max": float(values.max()),
+        }
     }
 
 
@@ -263,7 +289,8 @@ def describe_stalls(summary: dict[str, Any]) -> str:
     if not count:
         return "never"
     return (
-        f"in {count} episode(s): holding the tissue cost {summary['stall_static_load_n']:.3f} N (median), "
+        f"in {count} episode(s): the force on the held tissue (measured, or its travel bound with an inexact "
+        f"sensor) was {summary['stall_static_load_n']:.3f} N (median), "
         f"up to {summary['stall_static_load_to_limit']:.2f} x the limit"
     )
 

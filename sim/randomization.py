@@ -7,7 +7,8 @@ names raise an error listing the valid ones.
 Streams. The parameters are drawn in order from the episode's generator, so a new parameter drawn from
 it would shift every later draw. Parameters that only the camera sees (:data:`RENDER_PARAMETERS`) come
 from a stream jumped once from the episode generator, and the dynamics disturbances
-(:data:`DYNAMICS_PARAMETERS`) from one jumped twice (:meth:`Randomizer.dynamics_stream`); jumping copies
+(:data:`DYNAMICS_PARAMETERS`) from one jumped twice (:meth:`Randomizer.dynamics_stream`), the force
+sensing's scale (:data:`SENSING_PARAMETERS`) from one jumped three times; jumping copies
 the bit generator without advancing it, so the same seed gives the same episode whatever these are.
 
 Dynamics disturbances (safe-control-gym style, all 0 by default, and 0 changes nothing):
@@ -19,6 +20,10 @@ Dynamics disturbances (safe-control-gym style, all 0 by default, and 0 changes n
   pose through a believed base frame translated by a seeded vector of this norm.
 * ``tracking_lag``: in [0, 1); the arm follows its joint set-point with a first-order lag per physics
   substep, ``q += (1 - lag) * (q_cmd - q)``.
+
+``force_sensing_scale`` multiplies every error term of the episode's force-sensing model
+(:mod:`sim.force_sensing`; 1 by default, and nothing with ``--force-sensing ideal``): a sweep over it asks
+what happens when the robot's sensing is worse, or better, than the model the filter's error bound is from.
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ __all__ = [
     "INTEGER_PARAMETERS",
     "PARAMETER_LIMITS",
     "RENDER_PARAMETERS",
+    "SENSING_PARAMETERS",
     "Randomizer",
 ]
 
@@ -66,6 +72,7 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "tracking_lag": (0.0, 0.0),
     # Drawn last, so that a thickness range leaves every other draw of a seed as it was.
     "tissue_thickness_mm": (3.0, 3.0),
+    "force_sensing_scale": (1.0, 1.0),
 }
 
 #: Parameters drawn as integers (inclusive range).
@@ -77,6 +84,9 @@ RENDER_PARAMETERS = frozenset({"tissue_texture_seed"})
 #: Dynamics disturbances, drawn from their own stream (see the module's note).
 DYNAMICS_PARAMETERS = ("joint_offset_rad", "base_error_m", "tracking_lag")
 
+#: The force sensing's error terms' scale (sim.force_sensing), drawn from a stream of its own.
+SENSING_PARAMETERS = frozenset({"force_sensing_scale"})
+
 #: Encoder offset of the insertion joint per unit of ``joint_offset_rad`` [m/rad].
 INSERTION_M_PER_RAD = 0.01
 
@@ -85,6 +95,7 @@ PARAMETER_LIMITS: dict[str, tuple[float, float, bool]] = {
     "joint_offset_rad": (0.0, np.inf, True),
     "base_error_m": (0.0, np.inf, True),
     "tracking_lag": (0.0, 1.0, False),
+    "force_sensing_scale": (0.0, 100.0, True),
 }
 
 
@@ -95,6 +106,14 @@ def _check_limits(name: str, value: float) -> None:
     if not (value >= low and (value <= high if closed else value < high)):
         bracket = "]" if closed else ")"
         raise ConfigurationError(name, value, f"a value in [{low:g}, {high:g}{bracket}")
+
+
+def _jumped(rng: np.random.Generator, jumps: int) -> np.random.Generator:
+    """A generator on ``rng``'s bit generator jumped ``jumps`` times (a copy where it cannot jump)."""
+    jump = getattr(rng.bit_generator, "jumped", None)
+    if jump is not None:
+        return np.random.Generator(jump(jumps))
+    return copy.deepcopy(rng)
 
 
 class Randomizer:
@@ -127,10 +146,12 @@ class Randomizer:
     @staticmethod
     def dynamics_stream(rng: np.random.Generator) -> np.random.Generator:
         """The dynamics disturbances' stream: ``rng``'s bit generator jumped twice (``rng`` is not advanced)."""
-        jump = getattr(rng.bit_generator, "jumped", None)
-        if jump is not None:
-            return np.random.Generator(jump(2))
-        return copy.deepcopy(rng)
+        return _jumped(rng, 2)
+
+    @staticmethod
+    def sensing_stream(rng: np.random.Generator) -> np.random.Generator:
+        """The force sensing's stream: ``rng``'s bit generator jumped three times (``rng`` is not advanced)."""
+        return _jumped(rng, 3)
 
     def sample(
         self,
@@ -151,10 +172,15 @@ class Randomizer:
         jump = getattr(rng.bit_generator, "jumped", None)
         render_rng = np.random.Generator(jump()) if jump is not None else rng
         dynamics = dynamics_rng if dynamics_rng is not None else self.dynamics_stream(rng)
+        sensing = self.sensing_stream(rng)
         values: dict[str, float] = {}
         for name, (low, high) in self.ranges.items():
-            streams = {True: dynamics, False: render_rng if name in RENDER_PARAMETERS else rng}
-            source = streams[name in DYNAMICS_PARAMETERS]
+            if name in DYNAMICS_PARAMETERS:
+                source = dynamics
+            elif name in SENSING_PARAMETERS:
+                source = sensing
+            else:
+                source = render_rng if name in RENDER_PARAMETERS else rng
             if name in INTEGER_PARAMETERS:
                 drawn = float(source.integers(int(low), int(high) + 1))
             else:

@@ -23,8 +23,12 @@ __all__ = [
     "check_relative_ranges",
     "disturbances",
     "episode_options",
+    "integer_parameters",
+    "parameter_unit_labels",
     "parameter_units",
     "sweep_parameters",
+    "sweep_ranges",
+    "training_ranges",
 ]
 
 #: Short names accepted on the command line.
@@ -41,10 +45,22 @@ ALIASES: dict[str, str] = {
     "latency": "action_latency_steps",
     "joint_offset": "joint_offset_rad",
     "base_error": "base_error_m",
+    "sensing_scale": "force_sensing_scale",
 }
 
 #: Units a range of these parameters may name (``youngs_modulus=2:30kpa``); the values are in them anyway.
 _UNITS = {"tissue_youngs_modulus_kpa": "kpa", "tissue_thickness_mm": "mm"}
+
+#: Units of values by the suffix of their full name, as reports print them (longest suffix first).
+_SUFFIX_UNIT_LABELS = (
+    ("_kg_m3", "kg/m^3"),
+    ("_m_s2", "m/s^2"),
+    ("_steps", "policy steps"),
+    ("_kpa", "kPa"),
+    ("_rad", "rad"),
+    ("_mm", "mm"),
+    ("_m", "m"),
+)
 
 #: Disturbances (safe-control-gym style), all sampled per trial. Observation offsets are in metres
 #: (the observation is positions in metres), action offsets in normalised action units.
@@ -63,6 +79,24 @@ _IMPULSE_START, _IMPULSE_STEPS = 10, 3
 def sweep_parameters() -> tuple[str, ...]:
     """Every name a sweep can vary: randomization parameters, their short names, disturbances."""
     return (*ALIASES, *DEFAULT_RANGES, *DISTURBANCE_PARAMETERS)
+
+
+def integer_parameters() -> frozenset[str]:
+    """Sweep names (short and full) of the parameters that take whole numbers (``latency`` in steps)."""
+    return frozenset(INTEGER_PARAMETERS) | {alias for alias, full in ALIASES.items() if full in INTEGER_PARAMETERS}
+
+
+def parameter_unit_labels() -> dict[str, str]:
+    """The unit each sweep name's values are in, for reports (``{"latency": "policy steps", ...}``)."""
+    labels = {}
+    for name in sweep_parameters():
+        full = ALIASES.get(name, name)
+        label = next((unit for suffix, unit in _SUFFIX_UNIT_LABELS if full.endswith(suffix)), "")
+        if full.startswith("action_") and not label:
+            label = "action units"
+        if label:
+            labels[name] = label
+    return labels
 
 
 def parameter_units() -> dict[str, str]:
@@ -92,6 +126,45 @@ def check_relative_ranges(ranges: Iterable[ParameterRange]) -> None:
             raise ConfigurationError(
                 f"vary.{r.name}", r.describe(), "an absolute LOW:HIGH range (its nominal value is 0)"
             )
+
+
+def sweep_ranges(
+    ranges: Iterable[tuple[str, float, float, bool]],
+) -> dict[str, tuple[float, float]]:
+    """The randomization ranges an environment of a sweep declares: the defaults widened to the swept ones.
+
+    A sweep fixes each swept parameter per episode (:func:`episode_options`), so these ranges draw nothing
+    new; they tell the safety layer what tissue the sweep may meet (its stiffness and load bounds,
+    :func:`sim.force_sensing.tissue_bounds`), as a user declares the tissue range they deploy on.
+
+    Args:
+        ranges: ``(name, low, high, relative)`` per swept parameter.
+    """
+    declared: dict[str, tuple[float, float]] = {}
+    for name, low, high, relative in ranges:
+        full = ALIASES.get(name, name)
+        if full not in DEFAULT_RANGES:
+            continue
+        scale = nominal(full) if relative else 1.0
+        default_low, default_high = DEFAULT_RANGES[full]
+        declared[full] = (min(default_low, low * scale), max(default_high, high * scale))
+    return declared
+
+
+def training_ranges(ranges: Iterable[tuple[str, float, float, bool]]) -> dict[str, tuple[float, float]]:
+    """The randomization ranges a training run draws from: each swept name's range, made absolute.
+
+    Raises:
+        ConfigurationError: A disturbance (a sweep's wrapper, not a randomization parameter).
+    """
+    drawn: dict[str, tuple[float, float]] = {}
+    for name, low, high, relative in ranges:
+        if name in DISTURBANCE_PARAMETERS:
+            raise ConfigurationError(f"vary.{name}", name, "a randomization parameter (disturbances are sweeps' only)")
+        full = ALIASES.get(name, name)
+        scale = nominal(full) if relative else 1.0
+        drawn[full] = (low * scale, high * scale)
+    return drawn
 
 
 def episode_options(params: Mapping[str, float], relative: Mapping[str, bool]) -> dict[str, float]:

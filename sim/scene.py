@@ -31,7 +31,7 @@ from sim.grasp import Grasp, GraspParams
 from sim.psm_body import PsmBody
 from sim.tissue import Tissue, TissueParams
 
-__all__ = ["HIDDEN_HALF_EXTENTS_M", "PhysicsParams", "Scene"]
+__all__ = ["FLAP_SAG_MAX_M", "HIDDEN_HALF_EXTENTS_M", "RCM_ABOVE_FLAP_M", "PhysicsParams", "Scene"]
 
 #: Half extents of the hidden tissue box (x, y, z) [m].
 HIDDEN_HALF_EXTENTS_M = np.array([0.022, 0.015, 0.004])
@@ -40,7 +40,10 @@ _HIDDEN_CENTRE_Y_M = 0.018  # under the free-edge half of the flap
 # about 15 mm over the randomization ranges), does not rest on it: resting deformable-rigid contact
 # costs about three times the rest of a substep (measured), while the retraction lifts the flap anyway.
 _FLAP_HEIGHT_M = 2 * HIDDEN_HALF_EXTENTS_M[2] + 0.018
-_RCM_ABOVE_FLAP_M = 0.135
+#: Height of the RCM (the port) above the flap's pinned edges, before the rcm_z_m randomization [m].
+RCM_ABOVE_FLAP_M = 0.135
+#: Largest sag of the flap under gravity over the randomization ranges [m] (see the note above).
+FLAP_SAG_MAX_M = 0.015
 
 
 @dataclass(frozen=True)
@@ -170,8 +173,14 @@ class Scene:
             density_kg_m3=values["tissue_density_kg_m3"],
             damping=values["tissue_damping"],
             friction=tissue.friction,
-            rgba=(values["tissue_color_r"], values["tissue_color_g"], values["tissue_color_b"], 1.0),
+            # A texture from a file (a photo) shows in its own colours; the drawn colour tints the procedural one.
+            rgba=(1.0, 1.0, 1.0, 1.0)
+            if tissue.texture_path is not None
+            else (values["tissue_color_r"], values["tissue_color_g"], values["tissue_color_b"], 1.0),
             texture_seed=int(values["tissue_texture_seed"]),
+            texture_path=tissue.texture_path,
+            mark_sites=tissue.mark_sites,
+            site_offset_m=(values["site_offset_x_m"], values["site_offset_y_m"]),
             site_inset_m=tissue.site_inset_m,
             site_spacing_m=tissue.site_spacing_m,
         )
@@ -180,7 +189,7 @@ class Scene:
         p.setPhysicsEngineParameter(fixedTimeStep=physics.time_step_s, physicsClientId=client)
         self.tissue = Tissue(client, self.tissue_params, self.tissue_origin)
         self.rcm_position = self.tissue_origin + np.array(
-            [values["rcm_x_m"], 0.02 + values["rcm_y_m"], _RCM_ABOVE_FLAP_M + values["rcm_z_m"]]
+            [values["rcm_x_m"], 0.02 + values["rcm_y_m"], RCM_ABOVE_FLAP_M + values["rcm_z_m"]]
         )
         transform = np.eye(4)
         transform[:3, 3] = self.rcm_position

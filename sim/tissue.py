@@ -31,6 +31,7 @@ import tempfile
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pybullet as p
@@ -39,7 +40,17 @@ from psm_control.errors import ConfigurationError
 from sim.material import spring_stiffness_n_per_m
 from sim.mechanics import spring_forces
 
-__all__ = ["SITE_NAMES", "Tissue", "TissueParams", "cached_file", "grid_mesh", "texture_file", "texture_image"]
+__all__ = [
+    "SITE_NAMES",
+    "Tissue",
+    "TissueParams",
+    "cached_file",
+    "grid_mesh",
+    "marked_texture_file",
+    "read_texture",
+    "texture_file",
+    "texture_image",
+]
 
 #: Grasp sites along the free edge, as in the paper's Task III.
 SITE_NAMES = ("centre", "left", "right")
@@ -60,6 +71,11 @@ class TissueParams:
         rgba: Display colour (multiplies the texture).
         texture_seed: Seed of the procedural texture (:func:`texture_image`); ``None`` draws the flap
             in the flat colour. Only the rendering depends on it.
+        texture_path: An image file (PNG or JPEG) shown on the flap instead of the procedural texture,
+            e.g. a photo of a phantom; it spans the flat flap once, its top row along the free edge.
+        mark_sites: Ink a dark dot (2 mm radius) on each grasp site, as a surgeon's marker would.
+        site_offset_m: The sites' offset from their named places in the flap's plane (x, y) [m], where
+            the dots go.
         site_inset_m: Distance of the grasp sites in from the free edge [m].
         site_spacing_m: Distance of the left/right sites from the centre site [m].
     """
@@ -73,6 +89,9 @@ class TissueParams:
     friction: float = 0.5
     rgba: tuple[float, float, float, float] = (0.85, 0.42, 0.42, 1.0)
     texture_seed: int | None = None
+    texture_path: str | None = None
+    mark_sites: bool = False
+    site_offset_m: tuple[float, float] = (0.0, 0.0)
     site_inset_m: float = 0.004
     site_spacing_m: float = 0.022
 
@@ -131,6 +150,7 @@ def _grid_topology(resolution: int) -> tuple[np.ndarray, np.ndarray]:
 #: Side of the square texture images [px].
 TEXTURE_SIZE_PX = 64
 _CACHE_SIZE = 64  # files (textures and meshes) kept per process
+_PREFIX = "tissue_retract_"  # of the per-process temporary directories
 
 
 def _smooth_noise(rng: np.random.Generator, cells: int, size: int) -> np.ndarray:
@@ -180,7 +200,10 @@ def _write_png(path: str, image: np.ndarray) -> None:
 class _Files:
     """This process's temporary directory for meshes and textures, removed when the process exits.
 
-    Keyed by process id, so that a forked worker (vectorised environments) writes and removes its own.
+    Keyed by process id, so that a forked worker (vectorised environments) writes and removes its own. The
+    directory's name carries the process id (``tissue_retract_<pid>_*``): a process that ends without its
+    exit handlers (killed, or a pool worker leaving by ``os._exit``) leaves its directory behind, and the
+    next process to make one removes every such directory whose process is gone, so they never accumulate.
     """
 
     def __init__(self) -> None:
@@ -191,7 +214,8 @@ class _Files:
     def path(self, name: str) -> str:
         if self.pid != os.getpid():
             self.pid = os.getpid()
-            self.directory = tempfile.mkdtemp(prefix="tissue_retract_")
+            _remove_orphaned_directories()
+            self.directory = tempfile.mkdtemp(prefix=f"{_PREFIX}{self.pid}_")
             self.cache.clear()
             atexit.register(_remove_directory, self.pid, self.directory)
         return os.path.join(self.directory, name)
@@ -208,6 +232,24 @@ class _Files:
             old, _ = self.cache.popitem(last=False)
             os.remove(self.path(old))
         return path
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def _remove_orphaned_directories() -> None:
+    """Remove the ``tissue_retract_<pid>_*`` directories of processes that no longer run."""
+    for path in Path(tempfile.gettempdir()).glob(f"{_PREFIX}*_*"):
+        pid_text = path.name[len(_PREFIX) :].split("_", 1)[0]
+        if pid_text.isdigit() and path.is_dir() and not _process_alive(int(pid_text)):
+            shutil.rmtree(path, ignore_errors=True)
 
 
 def _remove_directory(pid: int, directory: str) -> None:
@@ -229,19 +271,61 @@ def texture_file(seed: int) -> str:
     return _FILES.get(f"texture_{seed}.png", lambda path: _write_png(path, texture_image(seed)))
 
 
-def _obj_file(resolution: int, size_m: float) -> str:
-    """Path of the flap's OBJ mesh, with texture coordinates, written once per process and cached."""
+#: Side of a texture with inked sites [px]: 0.3 mm per pixel on the 8 cm flap, so a dot is round.
+MARKED_TEXTURE_PX = 256
+#: Radius of an inked site, as a fraction of the texture's side (2 mm on the 8 cm flap).
+INK_DOT_RADIUS = 0.025
+
+
+def marked_texture_file(path: str | None, seed: int | None, points_uv: list[np.ndarray]) -> str:
+    """A texture with a dark dot at each ``points_uv`` (texture coordinates, u along x, v along y).
+
+    The base is the image at ``path`` or the procedural texture of ``seed`` (flat without either).
+    """
+    size = MARKED_TEXTURE_PX
+    if path is not None:
+        base = read_texture(path, size)
+    elif seed is not None:
+        small = texture_image(int(seed))
+        base = np.repeat(np.repeat(small, size // small.shape[0], axis=0), size // small.shape[1], axis=1)
+    else:
+        base = np.full((size, size, 3), 255, dtype=np.uint8)
+    image = base.copy()
+    rows, cols = np.mgrid[0:size, 0:size]
+    for u, v in points_uv:
+        # PyBullet's renderer reads texture row 0 at v = 1 (found by projecting inked sites into renders).
+        dot = (cols + 0.5 - u * size) ** 2 + (rows + 0.5 - (1.0 - v) * size) ** 2 <= (INK_DOT_RADIUS * size) ** 2
+        image[dot] = (40, 25, 60)
+    key = zlib.crc32(image.tobytes())
+    return _FILES.get(f"marked_{key:08x}.png", lambda out: _write_png(out, image))
+
+
+def read_texture(path: str, size: int) -> np.ndarray:
+    """An image file as a (size, size, 3) uint8 texture (resized, alpha dropped)."""
+    from PIL import Image  # Pillow comes with matplotlib and imageio
+
+    with Image.open(path) as picture:
+        return np.asarray(picture.convert("RGB").resize((size, size)), dtype=np.uint8)
+
+
+def _obj_file(resolution: int) -> str:
+    """Path of the flap's OBJ mesh of unit size, with texture coordinates, written once per process and cached.
+
+    One file per resolution, scaled to the flap's size when loaded: PyBullet keeps every mesh file it has
+    parsed for the life of the process, so a file per randomized size grew a sweep's workers by about 8 kB
+    an episode, without bound (measured: 2.4 MB over 300 sizes, none with one file and ``scale``).
+    """
 
     def write(path: str) -> None:
-        vertices, triangles = grid_mesh(resolution, size_m)
-        uv = vertices[:, :2] / size_m + 0.5  # the texture spans the flat flap once
+        vertices, triangles = grid_mesh(resolution, 1.0)
+        uv = vertices[:, :2] + 0.5  # the texture spans the flat flap once
         lines = [f"v {x:.7f} {y:.7f} {z:.7f}" for x, y, z in vertices]
         lines += [f"vt {u:.6f} {v:.6f}" for u, v in uv]
         lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in triangles]
         with open(path, "w") as f:
             f.write("\n".join(lines) + "\n")
 
-    return _FILES.get(f"flap_{resolution}_{size_m!r}.obj", write)
+    return _FILES.get(f"flap_{resolution}.obj", write)
 
 
 class Tissue:
@@ -261,8 +345,9 @@ class Tissue:
         vertices, self.triangles = grid_mesh(params.resolution, params.size_m)
         self.rest_positions = vertices + self.origin
         self.body_id = p.loadSoftBody(
-            _obj_file(params.resolution, params.size_m),
+            _obj_file(params.resolution),
             basePosition=self.origin.tolist(),
+            scale=params.size_m,
             mass=params.mass_kg,
             useMassSpring=1,
             useBendingSprings=0,
@@ -283,7 +368,7 @@ class Tissue:
         # the spring forces of that artefact read up to 2 N in an episode whose true peak was 0.2 N).
         p.changeDynamics(self.body_id, -1, activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=client)
         p.changeVisualShape(self.body_id, -1, rgbaColor=list(params.rgba), physicsClientId=client)
-        self._texture_pending = params.texture_seed is not None
+        self._texture_pending = params.texture_seed is not None or params.texture_path is not None or params.mark_sites
         self.edges = _grid_topology(params.resolution)[1].copy()
         self.rest_lengths = np.linalg.norm(vertices[self.edges[:, 1]] - vertices[self.edges[:, 0]], axis=1)
         self.node_mass_kg = self._lumped_masses(vertices)
@@ -302,13 +387,22 @@ class Tissue:
         }
 
     def show_texture(self) -> None:
-        """Put the procedural texture on the flap, once, before its first render.
+        """Put the texture (procedural, the user's image, inked sites) on the flap, once, before its first render.
 
         Not at construction: drawing and loading a texture costs about a millisecond per episode, and most
         episodes (training, evaluation) are never rendered.
         """
-        if self._texture_pending and self.params.texture_seed is not None:
-            texture = p.loadTexture(texture_file(self.params.texture_seed), physicsClientId=self.client)
+        if self._texture_pending:
+            params = self.params
+            if params.mark_sites:
+                offset = np.asarray(params.site_offset_m, dtype=float)
+                points = [(local[:2] + offset) / params.size_m + 0.5 for local in self.site_local.values()]
+                path = marked_texture_file(params.texture_path, params.texture_seed, points)
+            elif params.texture_path is not None:
+                path = params.texture_path
+            else:
+                path = texture_file(int(params.texture_seed or 0))
+            texture = p.loadTexture(path, physicsClientId=self.client)
             p.changeVisualShape(self.body_id, -1, textureUniqueId=texture, physicsClientId=self.client)
         self._texture_pending = False
 

@@ -3,8 +3,11 @@
 Every grid setting is evaluated on the same episode seeds (common random numbers), so differences
 between settings are differences of the settings, not of luck. Settings are compared on success rate
 and on the largest peak retraction force any of their episodes saw; the Pareto front holds those no
-other setting beats on both. The recommendation is the most successful setting whose largest peak
-force stays under the user's bound (ties go to the lower force).
+other setting beats on both. The recommendation is the most successful setting whose force limit is at
+or below the user's bound (the limit is what bounds the next episode; the observed peaks are only a sample)
+and whose largest observed peak also stayed under it (ties go to the lower force). Its confidence is the
+Wilson interval of its success; a recommendation from few episodes, low success or a wide interval is
+flagged as weak.
 """
 
 from __future__ import annotations
@@ -29,11 +32,22 @@ __all__ = [
     "integer_settings",
     "pareto_front",
     "recommend",
+    "recommendation_warnings",
+    "setting_force_limit_n",
     "setting_results",
     "tunable_fields",
     "tuning_trials",
     "write_config",
 ]
+
+#: A recommendation from fewer episodes per setting is flagged as weak.
+CONFIDENT_EPISODES = 20
+#: A recommended setting with a lower success rate is flagged as weak.
+CONFIDENT_SUCCESS = 0.8
+#: A recommendation whose 95 % CI of success is wider than this (as a fraction) is flagged as weak.
+CONFIDENT_CI_WIDTH = 0.25
+#: Grid levels are computed in floating point; a limit this close to the bound counts as at the bound [N].
+_BOUND_TOLERANCE_N = 1e-9
 
 
 def tunable_fields() -> tuple[str, ...]:
@@ -143,12 +157,47 @@ def pareto_front(results: Sequence[SettingResult]) -> list[SettingResult]:
     return sorted((r for r in results if not dominated(r)), key=lambda r: r.max_peak_force_n)
 
 
-def recommend(results: Sequence[SettingResult], max_force_n: float) -> SettingResult | None:
-    """The most successful setting whose largest peak force is at most ``max_force_n`` (None if none is)."""
-    feasible = [r for r in results if r.max_peak_force_n <= max_force_n and r.errors == 0]
+def setting_force_limit_n(setting: Mapping[str, float], base_config: Mapping[str, Any] | None = None) -> float:
+    """The retraction-force limit [N] a grid setting runs with (its own, else the base configuration's)."""
+    config = SafetyConfig.from_mapping({**dict(base_config or {}), **integer_settings(setting)})
+    return config.effective_force_limit_n
+
+
+def recommend(
+    results: Sequence[SettingResult], max_force_n: float, base_config: Mapping[str, Any] | None = None
+) -> SettingResult | None:
+    """The most successful setting whose force limit and largest peak force are at most ``max_force_n``.
+
+    A setting whose limit is above the bound is never recommended, however low its observed peaks: a few
+    episodes' largest peak does not bound the next episode's, the limit does. None if no setting qualifies.
+    """
+    bound = max_force_n + _BOUND_TOLERANCE_N
+    feasible = [
+        r
+        for r in results
+        if r.errors == 0 and r.max_peak_force_n <= bound and setting_force_limit_n(r.setting, base_config) <= bound
+    ]
     if not feasible:
         return None
     return max(feasible, key=lambda r: (r.success_rate, -r.max_peak_force_n))
+
+
+def recommendation_warnings(result: SettingResult) -> list[str]:
+    """Why a recommendation is weak: few episodes, low success or a wide 95 % CI (empty if none applies)."""
+    low, high = result.ci95
+    warnings = []
+    if result.episodes < CONFIDENT_EPISODES:
+        warnings.append(
+            f"only {result.episodes} episodes per setting (at least {CONFIDENT_EPISODES} for a confident choice)"
+        )
+    if result.success_rate < CONFIDENT_SUCCESS:
+        warnings.append(f"success {100 * result.success_rate:.0f} % is below {100 * CONFIDENT_SUCCESS:.0f} %")
+    if high - low > CONFIDENT_CI_WIDTH:
+        warnings.append(
+            f"95 % CI {100 * low:.0f}-{100 * high:.0f} % is {100 * (high - low):.0f} points wide "
+            f"(more than {100 * CONFIDENT_CI_WIDTH:.0f})"
+        )
+    return warnings
 
 
 def write_config(

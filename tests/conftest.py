@@ -2,14 +2,46 @@
 
 from __future__ import annotations
 
+import os
+import shutil
 import subprocess
 import sys
+import tempfile
 
 import numpy as np
 import pytest
 
 from psm_control.robot import PsmModel
 from psm_control.spec import ARMS
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Each pytest-xdist worker gets a temporary folder of its own, for itself and its child processes.
+
+    ``tmp_path`` is per worker already; this covers what asks :mod:`tempfile` or ``$TMPDIR`` instead
+    (Ray's session files, libraries' scratch files). The path is short: Ray puts Unix sockets under it.
+    The ROS domain ids of the workers are kept apart in ``tests/ros/domains.py``.
+    """
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker is None:
+        return
+    folder = tempfile.mkdtemp(prefix=f"tr-{worker}-")
+    os.environ["TMPDIR"] = folder
+    tempfile.tempdir = None  # forget the folder tempfile chose before
+    config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under pytest-xdist (``--dist loadgroup``), a module's tests that share a module-scoped fixture (a
+    ``sim-dvrk`` started once, a deploy run once) go to one worker, so the fixture is built once, not on
+    both. Tests already in a group (the Ray tests) keep theirs."""
+    for item in items:
+        if item.get_closest_marker("xdist_group") is not None:
+            continue
+        definitions = getattr(item, "_fixtureinfo", None)
+        scopes = [d.scope for defs in (definitions.name2fixturedefs.values() if definitions else ()) for d in defs]
+        if "module" in scopes:
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
 @pytest.fixture(params=ARMS)

@@ -450,6 +450,7 @@ def _run(case: Case) -> Case:
     return case
 
 
+@pytest.mark.timeout(1800)  # about a hundred fresh interpreters: a hang guard that a loaded machine stays within
 def test_every_bad_input_gets_a_named_error_and_loses_nothing(tmp_path: Path) -> None:
     """Every bad input exits non-zero naming the field and what is allowed, with no traceback and no output."""
     (tmp_path / "policy.safetensors").write_bytes(MULTISITE.read_bytes())

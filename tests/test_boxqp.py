@@ -7,6 +7,7 @@ import pytest
 import qpsolvers
 from scipy import sparse
 
+from psm_control.active_set import ActiveSetQp
 from psm_control.boxqp import BOUNDED, FAILED, UNCONSTRAINED, solve_box_qp
 
 
@@ -89,3 +90,20 @@ def test_the_unconstrained_minimiser_is_kept_when_it_is_inside() -> None:
 def test_bad_problems_are_reported_failed_for_another_solver(P: np.ndarray, b: np.ndarray) -> None:
     x = np.empty(2)
     assert solve_box_qp(P, b, -np.ones(2), np.ones(2), x) == FAILED
+
+
+def test_the_problems_it_gives_up_on_are_solved_exactly_by_the_ik_fallback() -> None:
+    """Every instance the box QP reports FAILED is solved by the IK's fallback (DAQP), feasible and KKT to 1e-12."""
+    rng = np.random.default_rng(3)
+    fallback = ActiveSetQp(6, 0)
+    x = np.empty(6)
+    failed = 0
+    for _ in range(5000):
+        P, b, lower, upper = _instance(rng)
+        if solve_box_qp(P, b, lower, upper, x) != FAILED:
+            continue
+        failed += 1
+        solution = fallback.solve(P, -b, lower, upper)
+        assert solution.status == "solved" and solution.x is not None
+        assert solution.kkt.primal <= 1e-12 and solution.kkt.dual <= 1e-12
+    assert failed > 20

@@ -52,8 +52,8 @@ def test_residual_is_the_weighted_linearised_error(classic: PsmModel) -> None:
     assert np.any(np.isclose(np.abs(result.dq), 0.01))
 
 
-def test_kept_workspace_agrees_with_a_rebuilt_solve(classic: PsmModel) -> None:
-    """The kept OSQP workspace and the naive qpsolvers rebuild give the same bounded step."""
+def test_exact_solve_agrees_with_a_rebuilt_osqp_solve(classic: PsmModel) -> None:
+    """The exact solve and the naive reference (OSQP through qpsolvers, rebuilt) give the same bounded step."""
     rng = np.random.default_rng(3)
     kept, naive = DifferentialIk(eps_abs=1e-7, eps_rel=1e-7), DifferentialIk(eps_abs=1e-7, eps_rel=1e-7, naive=True)
     for _ in range(20):

@@ -18,6 +18,7 @@ default ``"0:3"``) and ``TISSUE_RETRACT_FAULT_GATE`` (the go file of :class:`Gat
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import signal
@@ -35,7 +36,9 @@ import numpy as np
 from hardware_if.network import local_ros_env
 from hardware_if.replay import load_recording, summarize_recording
 from psm_control.errors import ConfigurationError
+from psm_control.robot import PsmModel
 from sim.expert import ScriptedExpert
+from tissue_retract.fault_setups import MOVED_OFFSET_RAD, move_arm_off_start, small_filesystem, wait_until_served
 
 __all__ = [
     "FAULTS",
@@ -247,9 +250,21 @@ FAULTS: tuple[Fault, ...] = (
     Fault("policy returns NaN (sim)", "sim", "ReturnsNan", 4, "invalid action"),
     Fault("SIGTERM mid-episode (sim)", "sim", "Hang", 143, "SIGTERM", action="signal:SIGTERM"),
     Fault("SIGKILL in episode 3 (sim)", "sim", "Hang", -9, "", action="kill-deploy", episodes=3, at="2:3"),
+    # One commander per arm (docs/one-commander.md).
+    Fault("another node streams servo_jp", "dvrk", "Gate", 4, "another commander: /fault_injector_", action="rogue"),
+    Fault("second deploy mid-episode", "dvrk", "Gate", 4, "another commander: ", action="second-deploy"),
+    Fault("second console at start", "dvrk", "Gate", 4, "another console: /PSM1 is served by 2", action="console"),
+    Fault(
+        "arm moved off its start (dry run)", "dvrk", "Gate", 4, "not at start", action="move-arm", extra=("--dry-run",)
+    ),
+    Fault("disk full mid-episode", "dvrk", "FaultPolicy", 4, "recording failed", "disk-full", episodes=3, at="-1:0"),
+    Fault("disk full (sim)", "sim", "FaultPolicy", 4, "recording failed", action="disk-full", episodes=40, at="-1:0"),
 )
 #: Seed of the Task I episodes (one the scripted expert completes).
 SEED = 2
+#: The small file system of the disk-full faults [bytes], and what the dVRK one leaves free at the start.
+SMALL_FS_BYTES = 1024 * 1024
+SMALL_FS_FREE_BYTES = 128 * 1024
 
 
 def fault_named(name: str) -> Fault:
@@ -360,6 +375,15 @@ class _Injector:
         # The simulated console subscribes to state_command volatile: the periodic QoS matches it.
         return self.node.create_publisher(kind, name, periodic_qos()), message
 
+    def moved_message(self) -> Any:
+        """A ``servo_jp`` 0.25 rad off the task's start on yaw, as a teleoperation node left running sends."""
+        from hardware_if import convert
+        from hardware_if.crtk import JOINT_NAMES
+
+        q = PsmModel.from_variant().home()
+        q[0] += MOVED_OFFSET_RAD
+        return convert.joint_state(JOINT_NAMES, q)
+
     def tracking_message(self) -> Any:
         """A ``setpoint_js`` 1 rad from anywhere the arm can be on outer_yaw (beyond the 0.5 rad trip)."""
         from hardware_if import convert
@@ -399,12 +423,13 @@ def run_fault(fault: Fault, workdir: Path, domain_id: int, *, guard_s: float = 3
     """Run one fault in ``workdir`` on ROS domain ``domain_id``; return what happened.
 
     ``guard_s`` only bounds a run that went wrong; a correct one ends as soon as its deploy does. When
-    another machine user's arm shares the domain (the deploy holds on ``publisher conflict``), the fault
+    another machine user's arm shares the domain (the deploy holds on ``another console``), the fault
     runs again on another domain, up to twice.
     """
     for attempt in range(3):
         result = _run_fault(fault, workdir, 1 + (domain_id - 1 + 37 * attempt) % 100, guard_s)
-        if "publisher conflict" not in result.hold or "publisher conflict" in fault.reason:
+        shared = any(text in result.hold for text in ("publisher conflict", "another console"))
+        if not shared or "another console" in fault.reason:
             break
     return result
 
@@ -416,7 +441,18 @@ def _run_fault(fault: Fault, workdir: Path, domain_id: int, guard_s: float) -> F
     gate = workdir / "go"
     gate.unlink(missing_ok=True)
     env[GATE_VARIABLE] = str(gate)
-    record = workdir / "run.mcap"
+    disk = (
+        small_filesystem(workdir / "small", SMALL_FS_BYTES, None if fault.target == "sim" else SMALL_FS_FREE_BYTES)
+        if fault.action == "disk-full"
+        else contextlib.nullcontext(workdir)
+    )
+    with disk as folder:
+        return _run_fault_in(fault, workdir, domain_id, guard_s, env, gate, folder / "run.mcap")
+
+
+def _run_fault_in(
+    fault: Fault, workdir: Path, domain_id: int, guard_s: float, env: dict[str, str], gate: Path, record: Path
+) -> FaultResult:
     record.unlink(missing_ok=True)
     deploy = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", f"{_MODULE}:{fault.policy}"]
     deploy += ["--target", fault.target, "--task", "lift", "--seed", str(SEED), "--record", str(record)]
@@ -440,8 +476,13 @@ def _run_fault(fault: Fault, workdir: Path, domain_id: int, guard_s: float) -> F
             console = _start([*server, "--task", "lift", "--seed", str(SEED)], env)
             if "--dry-run" in fault.extra and "not ready" not in fault.reason:
                 _enable(domain_id, guard_s)
-        if fault.action.startswith(("nan:", "early:", "tracking", "disable")):
+        if fault.action.startswith(("nan:", "early:", "tracking", "disable", "rogue", "console")):
             injector = _Injector(domain_id)
+        if fault.action == "console" and injector is not None:
+            wait_until_served(domain_id, guard_s)  # a console starting now would see this one and refuse
+            injector.publisher("measured_js")  # a second console's stream, discovered with the first
+        if fault.action == "move-arm":
+            move_arm_off_start(domain_id, guard_s)
         process = _start(deploy, env)
         lines = _Lines(process)
         if fault.action and not fault.action.startswith("early:"):
@@ -450,6 +491,13 @@ def _run_fault(fault: Fault, workdir: Path, domain_id: int, guard_s: float) -> F
             topic = fault.action.split(":", 1)[1]
             publisher, message = injector.publisher(topic)
             injector.flood(publisher, message, lines, "invalid data", guard_s)
+        elif fault.action == "rogue" and injector is not None:
+            publisher, _ = injector.publisher("servo_jp")
+            injector.flood(publisher, injector.moved_message(), lines, "another commander", guard_s)
+        elif fault.action == "second-deploy":
+            second = _start([*deploy[: deploy.index("--record")], "--record", str(workdir / "second.mcap")], env)
+            second.wait(timeout=guard_s)
+            lines.wait_for("another commander", min(guard_s, 60.0))  # the first saw it (it holds at the gate)
         elif fault.action == "tracking" and injector is not None:
             publisher, _ = injector.publisher("setpoint_js")
             injector.flood(publisher, injector.tracking_message(), lines, "holding, tracking error", guard_s)

@@ -11,12 +11,15 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
+from hardware_if.perceived_env import camera_task
 from policies.resolve import resolve_policy
 from safety.config import SafetyConfig
+from safety.force_bound import sensing_warning
 from sim.disturbances import DisturbanceWrapper
 from sim.envs import make
 from sim.evaluation import check_start_inside_workspace, run_episode
 from sim.robustness import disturbances, episode_options
+from sim.tissue import TissueParams
 from sim.tuning import integer_settings
 
 __all__ = ["ROBUSTNESS_WORKER", "TUNING_WORKER", "check_sweep_policy", "robustness_episode", "tuning_episode"]
@@ -28,33 +31,69 @@ TUNING_WORKER = f"{__name__}:tuning_episode"
 _CACHE: dict[tuple[Any, ...], Any] = {}
 
 
-def _environment(task: str, safety: bool, safety_config: Mapping[str, Any] | None) -> Any:
-    key = ("env", task, safety, json.dumps(dict(safety_config or {}), sort_keys=True))
+def _environment(
+    task: str,
+    safety: bool,
+    safety_config: Mapping[str, Any] | None,
+    force_sensing: str = "ideal",
+    tissue_ranges: Mapping[str, Any] | None = None,
+    perception: str | None = None,
+    texture: str | None = None,
+) -> Any:
+    """The worker's environment; ``perception``: ``camera[:MODEL]``; ``texture``: the flap's image file."""
+    declared = {k: tuple(v) for k, v in (tissue_ranges or {}).items()}
+    key = (
+        "env",
+        task,
+        safety,
+        json.dumps(dict(safety_config or {}), sort_keys=True),
+        force_sensing,
+        str(declared),
+        perception,
+        texture,
+    )
     if key not in _CACHE:
-        kwargs: dict[str, Any] = {"safety": safety}
+        kwargs: dict[str, Any] = {
+            "safety": safety,
+            "force_sensing": force_sensing,
+            "randomization": declared,
+            "tissue": TissueParams(texture_path=texture),
+        }
         if safety_config:
             kwargs["safety_config"] = SafetyConfig.from_mapping(safety_config)
         for old in [k for k in _CACHE if k[0] == "env"]:
             _CACHE.pop(old).close()  # one environment (one physics client) per worker process
-        _CACHE[key] = make(task, **kwargs)
+        env = make(task, **kwargs)
+        _CACHE[key] = env if perception is None else camera_task(env, perception.partition(":")[2] or None)
     return _CACHE[key]
 
 
 def check_sweep_policy(
-    policy: str, task: str, safety_config: Mapping[str, Any] | None, *, allow_other_task: bool = False
-) -> None:
+    policy: str,
+    task: str,
+    safety_config: Mapping[str, Any] | None,
+    *,
+    allow_other_task: bool = False,
+    force_sensing: str = "ideal",
+    tissue_ranges: Mapping[str, Any] | None = None,
+) -> str:
     """Before a sweep starts: the policy loads for the task and the start pose lies inside the workspace box.
 
     Raises:
         ConfigurationError: The policy cannot be found or the workspace excludes the start pose.
         CheckpointError: The checkpoint is invalid or was trained for another task.
+
+    Returns:
+        The sweep's force-sensing warning ('' when its limit is one the sensing resolves).
     """
-    env = _environment(task, True, safety_config)
+    env = _environment(task, True, safety_config, force_sensing, tissue_ranges)
     resolve_policy(policy, env, allow_other_task=allow_other_task)
     _, info = env.reset(seed=0)
     check_start_inside_workspace(env, float(info["workspace_violation_m"]))
+    warning = sensing_warning(env.unwrapped.safety_config, f"{force_sensing} force sensing")
     for key in [k for k in _CACHE if k[0] == "env"]:
         _CACHE.pop(key).close()
+    return warning
 
 
 def robustness_episode(
@@ -66,6 +105,10 @@ def robustness_episode(
     safety: bool = True,
     safety_config: Mapping[str, Any] | None = None,
     allow_other_task: bool = False,
+    force_sensing: str = "ideal",
+    tissue_ranges: Mapping[str, Any] | None = None,
+    perception: str | None = None,
+    texture: str | None = None,
 ) -> dict[str, Any]:
     """Run one trial of a sweep and return its outcome.
 
@@ -77,9 +120,13 @@ def robustness_episode(
         safety: Run the safety filter (False only for ablations).
         safety_config: Keyword overrides of :class:`safety.config.SafetyConfig` for this sweep.
         allow_other_task: Run a checkpoint trained for another task (with the same spaces).
+        force_sensing: The force-sensing preset (:mod:`sim.force_sensing`).
+        tissue_ranges: The tissue ranges the sweep declares (:func:`sim.robustness.sweep_ranges`).
+        perception: ``camera[:MODEL]``: the site from the endoscope's images (``evaluate --perception``).
+        texture: The flap's texture image file.
     """
     params = {str(k): float(v) for k, v in trial["params"].items()}
-    env = _environment(task, safety, safety_config)
+    env = _environment(task, safety, safety_config, force_sensing, tissue_ranges, perception, texture)
     policy_key = ("policy", policy, id(env))
     if policy_key not in _CACHE:
         _CACHE[policy_key] = resolve_policy(policy, env, allow_other_task=allow_other_task)
@@ -102,6 +149,7 @@ def tuning_episode(
     task: str,
     base_config: Mapping[str, Any] | None = None,
     allow_other_task: bool = False,
+    force_sensing: str = "ideal",
 ) -> dict[str, Any]:
     """One episode of the policy under the trial's safety settings."""
     overrides = {**dict(base_config or {}), **integer_settings(trial["params"])}
@@ -112,4 +160,5 @@ def tuning_episode(
         relative={},
         safety_config=overrides,
         allow_other_task=allow_other_task,
+        force_sensing=force_sensing,
     )

@@ -33,6 +33,11 @@ class FilterState(NamedTuple):
         stiffness_n_per_m: Current tissue stiffness estimate along the force direction [N/m].
         dt: Control period [s].
         jaw_rad: The jaw's opening [rad], the smaller of commanded and measured (closed: it may hold tissue).
+        force_margin_n: How far the true force may exceed ``retraction_force_n`` [N] (the sensing's error,
+            or the held load where the force is bounded from the grasp point's travel): the force limit
+            keeps this much below its limit.
+        tissue_held: The jaws may hold tissue whatever the jaw and the force say (with an inexact force
+            sensor, until an opened jaw has surely let go: :class:`safety.force_bound.ForceBound`).
     """
 
     q: np.ndarray
@@ -44,6 +49,8 @@ class FilterState(NamedTuple):
     stiffness_n_per_m: float
     dt: float
     jaw_rad: float = 0.0
+    force_margin_n: float = 0.0
+    tissue_held: bool = False
 
 
 class LimitReport(NamedTuple):

@@ -42,9 +42,13 @@ CLOSED_JAW_RAD = 0.15
 CONTACT_FORCE_N = 0.05
 
 
-def may_hold_tissue(jaw_rad: float, force_n: np.ndarray) -> bool:
-    """The jaws may hold tissue: closed (below :data:`CLOSED_JAW_RAD`) or a contact force measured."""
-    return jaw_rad < CLOSED_JAW_RAD or float(force_n @ force_n) >= CONTACT_FORCE_N**2
+def may_hold_tissue(jaw_rad: float, force_n: np.ndarray, error_n: float = 0.0) -> bool:
+    """The jaws may hold tissue: closed (below :data:`CLOSED_JAW_RAD`) or a contact force measured.
+
+    ``error_n`` is how far the measured force may be off: a contact is told only beyond it.
+    """
+    contact = CONTACT_FORCE_N + error_n
+    return jaw_rad < CLOSED_JAW_RAD or float(force_n @ force_n) >= contact * contact
 
 
 def _icosahedral_directions() -> np.ndarray:
@@ -129,11 +133,14 @@ class RetractionForceLimit(Limit):
         return np.asarray(FORCE_DIRECTIONS @ _rotation_from_z(x / magnitude, y / magnitude, z / magnitude).T)
 
     def compute_qp_inequalities(self, state: FilterState) -> tuple[np.ndarray, np.ndarray]:
-        """Rows ``K u_k^T J dq <= F_max - u_k^T (F + K J d_stop)`` for the 32 normals; unused when nothing is held."""
+        """Rows ``K u_k^T J dq <= F_max - m - u_k^T (F + K J d_stop)`` for the 32 normals, ``m`` the force's margin.
+
+        Unused when nothing is held.
+        """
         force = np.asarray(state.retraction_force_n, dtype=float)
         if not np.all(np.isfinite(force)):
             force = np.zeros(3)  # the chain stops on a non-finite force before filtering; never trust one here
-        elif not may_hold_tissue(state.jaw_rad, force):
+        elif not (state.tissue_held or may_hold_tissue(state.jaw_rad, force, state.force_margin_n)):
             self._G[:] = 0.0
             self._h[:] = np.inf
             return self._G, self._h
@@ -141,5 +148,5 @@ class RetractionForceLimit(Limit):
         np.dot(normals, state.grasp_jacobian, out=self._G)
         self._G *= state.stiffness_n_per_m
         coasting = state.stiffness_n_per_m * (state.grasp_jacobian @ self.stopping_displacement(state.qd))
-        np.subtract(self.force_limit_n, normals @ (force + coasting), out=self._h)
+        np.subtract(self.force_limit_n - state.force_margin_n, normals @ (force + coasting), out=self._h)
         return self._G, self._h

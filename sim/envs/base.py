@@ -9,23 +9,27 @@ site counts, how the goal is drawn and what the achieved goal is.
 from __future__ import annotations
 
 import collections
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import pinocchio as pin
 import pybullet as p
 
 from psm_control.commands import CartesianDelta, MeasuredState
 from psm_control.errors import UnknownVariantError
+from psm_control.quaternion import quaternion_xyzw
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
 from safety.force_watch import FORCE_LIMIT_STALL, ForceLimitWatch
 from sim.backend import SimBackend
 from sim.control import make_controller
+from sim.endoscope import Appearance, Endoscope, StereoFrame, render_stereo
 from sim.exposure import exposed_fraction, surface_samples
+from sim.force_sensing import ForceSensor, error_bound_n, sensing_params, with_sensing
 from sim.grasp import GraspParams
 from sim.mechanics import DamageLimits, grasp_force, measure, spring_strain
 from sim.psm_body import PsmBody
@@ -61,9 +65,15 @@ class EnvConfig:
         grasp: Grasp settings.
         damage: Tissue damage thresholds.
         randomization: Overrides of the randomization ranges.
-        camera: The endoscope camera.
+        camera: The camera of ``render()`` (placed relative to the flap).
+        endoscope: The stereo endoscope, fixed in the world (:meth:`TissueRetractEnv.render_endoscope`).
         safety_config: The control chain's limits (force limit, workspace box, motion limits); None: the
-            :class:`~safety.config.SafetyConfig` defaults. Its control rate is replaced by the physics'.
+            :class:`~safety.config.SafetyConfig` defaults. Its control rate is replaced by the physics', and
+            its force-sensing error and tissue bounds by the sensing's and the tissue ranges' (see
+            :func:`sim.force_sensing.with_sensing`).
+        force_sensing: What the controller and the policy sense of the tissue force: ``ideal`` (the exact
+            force), ``dvrk`` (the console's ``measured_cf`` from motor currents) or ``dvrk-calibrated``
+            (:mod:`sim.force_sensing`). Episode records keep the true force as well.
     """
 
     max_step_m: float = 0.005
@@ -78,7 +88,9 @@ class EnvConfig:
     damage: DamageLimits = field(default_factory=DamageLimits)
     randomization: dict[str, tuple[float, float]] = field(default_factory=dict)
     camera: Camera = field(default_factory=Camera)
+    endoscope: Endoscope = field(default_factory=Endoscope)
     safety_config: SafetyConfig | None = None
+    force_sensing: str = "ideal"
 
 
 class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -102,6 +114,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             raise UnknownVariantError("render_mode", render_mode, ["None", "rgb_array"])
         self.render_mode = render_mode
         self.randomizer = Randomizer(self.config.randomization)
+        self.use_force_sensing(self.config.force_sensing)
         self.model = PsmModel()
         self.client = p.connect(p.DIRECT)
         self._arm_client = p.connect(p.DIRECT)  # the kinematic arm's own, never stepped (see sim.scene)
@@ -120,6 +133,22 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.controller_name = ""
         self._joint_offset: np.ndarray | None = None
         self._base_error: np.ndarray | None = None
+
+    def use_randomization(self, ranges: dict[str, tuple[float, float]]) -> None:
+        """Draw the next episodes from these ranges (over the configured ones), and bound the tissue by them."""
+        self.randomizer = Randomizer({**self.config.randomization, **ranges})
+        self.use_force_sensing(self.sensing.name)
+
+    def use_force_sensing(self, name: str) -> None:
+        """Sense the tissue force through the preset ``name`` from the next episode on (:mod:`sim.force_sensing`).
+
+        The controller is rebuilt at the next reset: its filter trusts the force to the sensing's error bound.
+        """
+        self.sensing = sensing_params(name)
+        self.safety_config = with_sensing(
+            self.config.safety_config or SafetyConfig(), error_bound_n(self.sensing), self.randomizer.ranges
+        )
+        self.controller = None
 
     # ----------------------------------------------------------------- task hooks
     def _choose_site(self, rng: np.random.Generator) -> str:
@@ -152,6 +181,9 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         dynamics_rng = self.randomizer.dynamics_stream(self.np_random)
         self.values = self.randomizer.sample(self.np_random, options, dynamics_rng)
         self._joint_offset, self._base_error = self._dynamics_errors(dynamics_rng)
+        # The sensor's noise and drift: the sensing stream's own sensing stream (the scale is drawn from the first).
+        sensing_rng = self.randomizer.sensing_stream(self.randomizer.sensing_stream(self.np_random))
+        self.sensor = ForceSensor(self.sensing.scaled(self.values["force_sensing_scale"]), sensing_rng)
         self.site = str(task.get("site", self._choose_site(self.np_random)))
         cfg = self.config
         self.scene = Scene(self.client, self.arm, self.values, cfg.physics, cfg.grasp, cfg.tissue)
@@ -180,7 +212,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 self.scene.configuration,
                 safety=cfg.safety,
                 control_period_s=cfg.physics.control_period_s,
-                config=cfg.safety_config,
+                config=self.safety_config,
             )
         self.controller.log.clear()
         self.controller.reset(self.backend.measure())
@@ -204,8 +236,11 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         latency = int(self.values["action_latency_steps"])
         self._pending: collections.deque[np.ndarray] = collections.deque([np.zeros(5)] * latency)
         self._force = np.zeros(3)
+        self._sensed_force = np.zeros(3)
+        self._sensed_peak = 0.0
         self._strain = 0.0
         self._holding_steps = 0
+        self._last_measured = self._measured()
         return self._observation(), self._info(events={})
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
@@ -219,7 +254,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         cfg = self.config
         jaw = cfg.jaw_closed_rad if act[4] < 0 else cfg.jaw_open_rad
         delta = CartesianDelta(act[:3] * cfg.max_step_m, float(act[3]) * cfg.max_yaw_rad, jaw, "base")
-        measured = self._measured()
+        measured = self._last_measured
         self.controller.set_target(delta, measured)
         stops, reasons = 0, []
         interventions: set[str] = set()
@@ -256,6 +291,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         else:
             self._update_tissue(events)
         peak = max(peak, self._watch_tick())
+        self._last_measured = self._measured()  # what the next step starts from, and the observation's force
         events.update(
             force_peak_n=peak,
             sim_unstable=unstable,
@@ -284,13 +320,26 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def render_frame(self) -> Frame:
         """RGB, depth and class segmentation of the current scene."""
+        with self._bodies_in_view() as bodies:
+            return render(self.client, self.config.camera, self._scene().tissue_origin, bodies)
+
+    def render_endoscope(self, appearance: Appearance, rng: np.random.Generator) -> StereoFrame:
+        """The stereo endoscope's pair under ``appearance`` (``rng`` draws the sensor noise)."""
+        with self._bodies_in_view() as bodies:
+            return render_stereo(self.client, self.config.endoscope, appearance, bodies, rng)
+
+    def _scene(self) -> Scene:
         if self.scene is None:
             raise RuntimeError("call reset() before rendering")
-        s = self.scene
+        return self.scene
+
+    @contextlib.contextmanager
+    def _bodies_in_view(self) -> Iterator[dict[str, int]]:
+        """The scene's bodies by class for one render, the flap textured and the arm copied in."""
+        s = self._scene()
         s.tissue.show_texture()
         with s.arm_in_view() as instrument:
-            bodies = {"tissue": s.tissue.body_id, "hidden_tissue": s.hidden_id, "instrument": instrument}
-            return render(self.client, self.config.camera, s.tissue_origin, bodies)
+            yield {"tissue": s.tissue.body_id, "hidden_tissue": s.hidden_id, "instrument": instrument}
 
     def close(self) -> None:
         """Disconnect the physics client and the arm's."""
@@ -369,7 +418,16 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return float(np.linalg.norm(self._force))
 
     def _measured(self) -> MeasuredState:
-        self.backend.force_n = self._force
+        """The arm's measurement, with the force as the robot senses it (the true one with ``ideal``)."""
+        assert self.scene is not None and self.controller is not None
+        measured_q = self.backend.measure().q
+        configuration = self.scene.configuration
+        configuration.update(measured_q, self.backend.jaw)
+        self._sensed_force = self.sensor.measure(
+            configuration, self.backend.qd, self._force, self.controller.control_period_s
+        )
+        self._sensed_peak = max(self._sensed_peak, float(np.linalg.norm(self._sensed_force)))
+        self.backend.force_n = self._sensed_force
         return self.backend.measure()
 
     def _unstable(self, previous: np.ndarray, nodes: np.ndarray) -> bool:
@@ -412,9 +470,17 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if noise > 0:
             tip = tip + self.np_random.normal(0.0, noise, 3)
             site = site + self.np_random.normal(0.0, noise, 3)
-        quaternion = np.asarray(pin.Quaternion(pose[:3, :3]).coeffs())  # x, y, z, w
+        quaternion = quaternion_xyzw(pose[:3, :3])  # x, y, z, w
         observation = np.concatenate(
-            [tip, quaternion, [self.backend.jaw], site, site - tip, self._force, [float(self.scene.grasp.holding)]]
+            [
+                tip,
+                quaternion,
+                [self.backend.jaw],
+                site,
+                site - tip,
+                self._sensed_force,
+                [float(self.scene.grasp.holding)],
+            ]
         )
         return {
             "observation": observation.astype(np.float32),
@@ -461,6 +527,8 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         info["interventions"] = tuple(events.get("interventions", ()))
         info["force_peak_n"] = float(events.get("force_peak_n", info["force_norm_n"]))
         info["force_limit_n"] = self._force_watch.limit_n
+        info["measured_force_n"] = self._sensed_force.copy()
+        info["measured_force_peak_n"] = self._sensed_peak
         info["force_limit_exceeded"] = tuple(e.to_event() for e in self._force_watch.all())
         info["force_limit_stall"] = tuple(e for e in self._controller_events if e["kind"] == FORCE_LIMIT_STALL)
         return info

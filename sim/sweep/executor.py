@@ -24,7 +24,9 @@ from tqdm import tqdm
 
 from psm_control.errors import ConfigurationError, UnknownVariantError
 from sim.sweep.cluster import ray_cluster
+from sim.sweep.memory import WorkerMemory, resident_mb
 from sim.sweep.space import Trial
+from sim.sweep.stopping import STOP_GRACE_S, ignore_stop_signals, stop_pool
 from sim.sweep.store import EpisodeStore
 
 __all__ = ["BACKENDS", "call_worker", "cap_jobs", "run_trials"]
@@ -51,15 +53,18 @@ def call_worker(worker: str, trial: dict[str, Any], kwargs: dict[str, Any]) -> d
         raise
     except BaseException as e:
         return {**trial, "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=5)}
-    return {**trial, **outcome}
+    return {**trial, **outcome, "worker_pid": os.getpid(), "worker_rss_mb": resident_mb()}
 
 
 def _end_with_parent() -> None:
     """Pool initializer: end this worker as soon as the sweep's process is gone (even after a SIGKILL).
 
+    The worker ignores SIGINT and SIGTERM (:mod:`sim.sweep.stopping`): its trial finishes and is kept.
+
     A spawned process holds a sentinel that becomes ready when its parent dies; a daemon thread waits on
     it, so no orphaned worker (and, with them gone, no orphaned resource tracker) keeps running.
     """
+    ignore_stop_signals()  # the sweep's process stops the pool, after the running trials
     parent = multiprocessing.parent_process()
     if parent is None:
         return
@@ -99,6 +104,7 @@ def _run_local(
     store: EpisodeStore,
     max_attempts: int,
     progress: tqdm,
+    memory: WorkerMemory,
 ) -> None:
     attempts = {t.index: 0 for t in pending}
     queue = list(pending)
@@ -110,30 +116,39 @@ def _run_local(
         ) as pool:
             running: dict[Future[dict[str, Any]], Trial] = {}
             broken = False
-            while (queue or running) and not broken:
-                while queue and len(running) < 2 * jobs and not broken:
-                    trial = queue[0]
-                    try:
-                        future = pool.submit(call_worker, worker, trial.to_dict(), kwargs)
-                    except BrokenProcessPool:
-                        broken = True
+            try:
+                while (queue or running) and not broken:
+                    while queue and len(running) < 2 * jobs and not broken:
+                        trial = queue[0]
+                        try:
+                            future = pool.submit(call_worker, worker, trial.to_dict(), kwargs)
+                        except BrokenProcessPool:
+                            broken = True
+                            break
+                        queue.pop(0)
+                        attempts[trial.index] += 1
+                        running[future] = trial
+                    if not running:
                         break
-                    queue.pop(0)
-                    attempts[trial.index] += 1
-                    running[future] = trial
-                if not running:
-                    break
-                finished, _ = wait(running, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    trial = running.pop(future)
-                    try:
-                        record = future.result()
-                    except BrokenProcessPool:
-                        broken = True
-                        queue.insert(0, trial)
-                        continue
-                    store.append(record)
-                    progress.update(1)
+                    finished, _ = wait(running, return_when=FIRST_COMPLETED)
+                    for future in finished:
+                        trial = running.pop(future)
+                        try:
+                            record = future.result()
+                        except BrokenProcessPool:
+                            broken = True
+                            queue.insert(0, trial)
+                            continue
+                        store.append(memory.take(record))
+                        progress.update(1)
+            except KeyboardInterrupt:  # a stop signal: start nothing new, keep the trials that finish in the grace
+                wait(running, timeout=STOP_GRACE_S)
+                for future in running:
+                    if future.done() and not future.cancelled() and future.exception() is None:
+                        store.append(memory.take(future.result()))
+                        progress.update(1)
+                stop_pool(pool)  # the rest never finished: the resumed sweep runs them
+                raise
             if broken:
                 for future, trial in running.items():
                     future.cancel()
@@ -153,6 +168,7 @@ def _run_ray(
     store: EpisodeStore,
     max_attempts: int,
     progress: tqdm,
+    memory: WorkerMemory,
 ) -> None:
     with ray_cluster(jobs) as ray:
         # Ray re-runs a task whose worker process died, up to max_retries times.
@@ -166,7 +182,7 @@ def _run_ray(
                     record = ray.get(ref)
                 except (ray.exceptions.WorkerCrashedError, ray.exceptions.RayTaskError) as e:
                     record = {**_crash_record(trial, max_attempts), "error_detail": str(e)[:500]}
-                store.append(record)
+                store.append(memory.take(record))
                 progress.update(1)
 
 
@@ -204,12 +220,15 @@ def run_trials(
         raise ConfigurationError("max_attempts", max_attempts, "an integer >= 1")
     _resolve(worker)  # fail fast, before any process starts
     done = store.done()
+    memory = WorkerMemory()
     pending = [t for t in trials if t.index not in done]
     with tqdm(
         total=len(trials), initial=len(trials) - len(pending), desc="episodes", unit="ep", disable=not show_progress
     ) as progress:
         if pending:
             run = _run_local if backend == "local" else _run_ray
-            run(pending, worker, dict(worker_kwargs or {}), jobs, store, max_attempts, progress)
+            run(pending, worker, dict(worker_kwargs or {}), jobs, store, max_attempts, progress, memory)
+    if memory.line():
+        print(memory.line(), file=sys.stderr)
     wanted = {t.index for t in trials}
     return [r for r in store.ordered() if r["index"] in wanted]

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from psm_control.errors import TissueRetractError
+from sim.strict_json import strict_dumps
 
 __all__ = ["IDENTITY_FILE", "SweepIdentityError", "file_digest", "prepare_output"]
 
@@ -63,7 +64,7 @@ def prepare_output(out: Path, identity: Mapping[str, Any], *, fresh: bool = Fals
     out.mkdir(parents=True, exist_ok=True)
     record = out / IDENTITY_FILE
     episodes = out / _EPISODES_FILE
-    wanted = json.loads(json.dumps(dict(identity), sort_keys=True, default=str))
+    wanted = json.loads(strict_dumps(dict(identity), sort_keys=True, default=str))
     if fresh:
         for path in (episodes, record):
             path.unlink(missing_ok=True)
@@ -85,5 +86,5 @@ def prepare_output(out: Path, identity: Mapping[str, Any], *, fresh: bool = Fals
     elif episodes.is_file() and episodes.stat().st_size > 0:
         raise SweepIdentityError(out, [(IDENTITY_FILE, None, "a recorded sweep")])
     temporary = record.with_suffix(".json.tmp")
-    temporary.write_text(json.dumps(wanted, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    temporary.write_text(strict_dumps(wanted, indent=2, sort_keys=True) + "\n", encoding="utf-8")
     os.replace(temporary, record)

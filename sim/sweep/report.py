@@ -50,7 +50,11 @@ def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 def _plot_success(records: Sequence[dict[str, Any]], parameter: ParameterRange, path: Path) -> None:
-    stats = [b for b in binned_success(records, parameter.name, relative=parameter.relative) if b.episodes]
+    stats = [
+        b
+        for b in binned_success(records, parameter.name, relative=parameter.relative, integer=parameter.integer)
+        if b.episodes
+    ]
     figure = Figure(figsize=(5.5, 3.5), dpi=110)
     axis = figure.subplots()
     centres = [_centre(b.low, b.high, parameter.relative) for b in stats]
@@ -126,7 +130,9 @@ def _centre(low: float, high: float, relative: bool) -> float:
 
 
 def _axis_label(parameter: ParameterRange) -> str:
-    return parameter.name + (" (x nominal)" if parameter.relative else "")
+    if parameter.relative:
+        return f"{parameter.name} (x nominal)"
+    return f"{parameter.name} [{parameter.unit}]" if parameter.unit else parameter.name
 
 
 def _counts(counts: dict[str, int]) -> str:
@@ -134,9 +140,11 @@ def _counts(counts: dict[str, int]) -> str:
     return ", ".join(f"{name} {count}" for name, count in counts.items() if count) or "none"
 
 
-def _bin_label(low: float, high: float, relative: bool) -> str:
-    suffix = " x" if relative else ""
-    return f"{quantity(low)} to {quantity(high)}{suffix}"
+def _bin_label(low: float, high: float, parameter: ParameterRange) -> str:
+    unit = " x" if parameter.relative else (f" {parameter.unit}" if parameter.unit else "")
+    if parameter.integer:
+        return f"{low:.0f}{unit}" if low == high else f"{low:.0f} to {high:.0f}{unit}"
+    return f"{quantity(low)} to {quantity(high)}{unit}"
 
 
 def write_report(
@@ -207,7 +215,11 @@ def write_report(
         page.heading("Command")
         page.command(command)
     for parameter in ranges:
-        stats = [b for b in binned_success(records, parameter.name, relative=parameter.relative) if b.episodes]
+        stats = [
+            b
+            for b in binned_success(records, parameter.name, relative=parameter.relative, integer=parameter.integer)
+            if b.episodes
+        ]
         success_png = out_dir / f"success_vs_{parameter.name}.png"
         force_png = out_dir / f"peak_force_vs_{parameter.name}.png"
         _plot_success(records, parameter, success_png)
@@ -219,7 +231,7 @@ def write_report(
             [parameter.name, "episodes", "success", "95 % CI", "peak force max", "peak force p95"],
             [
                 [
-                    _bin_label(b.low, b.high, parameter.relative),
+                    _bin_label(b.low, b.high, parameter),
                     str(b.episodes),
                     percent(b.success_rate),
                     percent_interval(b.ci_low, b.ci_high),
@@ -236,7 +248,7 @@ def write_report(
         page.table(
             [parameter.name, *classes],
             [
-                [_bin_label(b.low, b.high, parameter.relative), *(str(b.failure_classes.get(c, 0)) for c in classes)]
+                [_bin_label(b.low, b.high, parameter), *(str(b.failure_classes.get(c, 0)) for c in classes)]
                 for b in stats
             ],
         )

@@ -9,6 +9,9 @@ Grammar of one range (comma-separated on the command line):
 * ``name=LOW:HIGHkpa`` absolute values with their unit spelt out, for parameters that have one
   (``youngs_modulus=2:30kpa``); another unit is refused, naming the parameter's.
 
+Integer parameters (``latency``, in whole policy steps) are sampled uniformly among the integers of their
+range and gridded on integers; a multiple of their nominal value is refused.
+
 Every trial's parameters depend only on the sweep seed and the trial's index, never on the order in
 which trials run, so any backend and any resumption give the same trial the same parameters.
 """
@@ -38,15 +41,21 @@ class ParameterRange:
         low: Lower end (a multiplier when ``relative``).
         high: Upper end (a multiplier when ``relative``).
         relative: Values are multiples of the parameter's nominal value.
+        integer: Values are whole numbers (the integers within ``low..high``).
+        unit: Unit of the values, for reports (``""`` when they have none).
     """
 
     name: str
     low: float
     high: float
     relative: bool = False
+    integer: bool = False
+    unit: str = ""
 
     def sample(self, rng: np.random.Generator) -> float:
-        """Draw one value (log-uniform for relative ranges)."""
+        """Draw one value (log-uniform for relative ranges, uniform among the integers for integer ones)."""
+        if self.integer:
+            return int(rng.integers(math.ceil(self.low), math.floor(self.high) + 1))
         if self.low == self.high:
             return self.low
         if self.relative:
@@ -54,7 +63,10 @@ class ParameterRange:
         return float(rng.uniform(self.low, self.high))
 
     def levels(self, count: int) -> list[float]:
-        """``count`` evenly spaced values (geometrically for relative ranges)."""
+        """``count`` evenly spaced values (geometrically for relative ranges; distinct integers for integer ones)."""
+        if self.integer:
+            spaced = np.linspace(math.ceil(self.low), math.floor(self.high), count)
+            return [int(v) for v in sorted({round(float(v)) for v in spaced})]
         if self.low == self.high or count == 1:
             return [self.low] if count == 1 or self.low == self.high else [self.low] * count
         if self.relative:
@@ -109,7 +121,12 @@ def _strip_unit(name: str, spec: str, unit: str | None) -> str:
 
 
 def parse_ranges(
-    text: str, valid_names: Iterable[str] | None = None, units: Mapping[str, str] | None = None
+    text: str,
+    valid_names: Iterable[str] | None = None,
+    units: Mapping[str, str] | None = None,
+    *,
+    integers: Iterable[str] = (),
+    unit_labels: Mapping[str, str] | None = None,
 ) -> tuple[ParameterRange, ...]:
     """Parse ``"stiffness=0.3:3x,obs_noise=0:0.002"`` into ranges.
 
@@ -117,12 +134,15 @@ def parse_ranges(
         text: Comma-separated ranges (grammar in the module docstring).
         valid_names: If given, names outside it raise :class:`UnknownVariantError` listing them.
         units: The unit a parameter's absolute values may carry as a suffix (``{"youngs_modulus": "kpa"}``).
+        integers: Names of the parameters that take whole numbers.
+        unit_labels: The unit each parameter's values are in, for reports (``{"latency": "steps"}``).
 
     Raises:
         ConfigurationError: Malformed item, non-numeric or inverted bounds, duplicate name,
             non-positive relative bounds.
     """
     valid = tuple(valid_names) if valid_names is not None else None
+    integer_names = frozenset(integers)
     ranges: list[ParameterRange] = []
     for item in (part.strip() for part in text.split(",")):
         if not item:
@@ -144,7 +164,12 @@ def parse_ranges(
             raise ConfigurationError(f"vary.{name}", spec, f"LOW <= HIGH (got {low:g} > {high:g})")
         if relative and low <= 0.0:
             raise ConfigurationError(f"vary.{name}", spec, "multipliers > 0")
-        ranges.append(ParameterRange(name, low, high, relative))
+        integer = name in integer_names
+        if integer and (relative or math.ceil(low) > math.floor(high)):
+            raise ConfigurationError(
+                f"vary.{name}", spec, "whole numbers: an absolute range holding an integer, e.g. 0:3"
+            )
+        ranges.append(ParameterRange(name, low, high, relative, integer, (unit_labels or {}).get(name, "")))
     if not ranges:
         raise ConfigurationError("vary", text, "at least one NAME=LOW:HIGH range")
     return tuple(ranges)

@@ -10,27 +10,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BinStats", "binned_success", "wilson_interval"]
+from sim.success_interval import describe_success, wilson_interval
 
-_Z95 = 1.959963984540054
-
-
-def wilson_interval(successes: int, total: int, z: float = _Z95) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion (95 % by default).
-
-    Chosen over the normal approximation because it stays inside [0, 1] and behaves at 0 % and
-    100 % success, which robustness sweeps hit often.
-    """
-    if total <= 0:
-        return (0.0, 1.0)
-    p = successes / total
-    denominator = 1.0 + z * z / total
-    centre = (p + z * z / (2 * total)) / denominator
-    half = z * math.sqrt(p * (1 - p) / total + z * z / (4 * total * total)) / denominator
-    # At 0 or all successes the exact bound is 0 or 1; rounding would otherwise leave it a hair inside.
-    low = 0.0 if successes == 0 else max(0.0, centre - half)
-    high = 1.0 if successes == total else min(1.0, centre + half)
-    return (low, high)
+__all__ = ["BinStats", "binned_success", "describe_success", "wilson_interval"]
 
 
 @dataclass(frozen=True)
@@ -65,19 +47,37 @@ class BinStats:
         return self.successes / self.episodes if self.episodes else math.nan
 
 
+#: An integer parameter with at most this many distinct values gets one bin per value.
+_MAX_INTEGER_BINS = 20
+
+
 def binned_success(
-    records: Sequence[dict[str, Any]], parameter: str, bins: int = 5, relative: bool = False
+    records: Sequence[dict[str, Any]], parameter: str, bins: int = 5, relative: bool = False, integer: bool = False
 ) -> list[BinStats]:
     """Split records into ``bins`` bins of one parameter's value and report success per bin.
 
     Records with an ``error`` are excluded (they are counted separately). Relative parameters are
-    binned geometrically.
+    binned geometrically. Integer parameters get one bin per value (``low == high``) when they take at
+    most 20 values, else bins of whole numbers (``low..high`` inclusive).
     """
     rows = [r for r in records if "error" not in r and parameter in r.get("params", {})]
     if not rows:
         return []
     values = np.array([float(r["params"][parameter]) for r in rows])
     low, high = float(values.min()), float(values.max())
+    if integer:
+        values = np.round(values)
+        distinct = np.unique(values)
+        if len(distinct) <= _MAX_INTEGER_BINS:
+            starts, ends = distinct, distinct
+        else:
+            starts = np.unique(np.floor(np.linspace(distinct[0], distinct[-1] + 1, bins + 1)))[:-1]
+            ends = np.append(starts[1:] - 1, distinct[-1])
+        which = np.searchsorted(starts, values, side="right") - 1
+        return [
+            _bin(float(starts[b]), float(ends[b]), [rows[i] for i in np.flatnonzero(which == b)])
+            for b in range(len(starts))
+        ]
     if low == high:
         edges = np.array([low, high])
     elif relative and low > 0:
@@ -85,23 +85,25 @@ def binned_success(
     else:
         edges = np.linspace(low, high, bins + 1)
     which = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, len(edges) - 2)
-    result = []
-    for b in range(len(edges) - 1):
-        members = [rows[i] for i in np.flatnonzero(which == b)]
-        successes = sum(1 for r in members if r.get("success"))
-        forces = [float(r["peak_force_n"]) for r in members if r.get("peak_force_n") is not None]
-        ci = wilson_interval(successes, len(members))
-        result.append(
-            BinStats(
-                float(edges[b]),
-                float(edges[b + 1]),
-                len(members),
-                successes,
-                ci[0],
-                ci[1],
-                float(np.percentile(forces, 95)) if forces else math.nan,
-                max(forces) if forces else math.nan,
-                dict(Counter(str(r.get("failure_class", "none")) for r in members)),
-            )
-        )
-    return result
+    return [
+        _bin(float(edges[b]), float(edges[b + 1]), [rows[i] for i in np.flatnonzero(which == b)])
+        for b in range(len(edges) - 1)
+    ]
+
+
+def _bin(low: float, high: float, members: list[dict[str, Any]]) -> BinStats:
+    """Success, force and failure classes of one bin's records."""
+    successes = sum(1 for r in members if r.get("success"))
+    forces = [float(r["peak_force_n"]) for r in members if r.get("peak_force_n") is not None]
+    ci = wilson_interval(successes, len(members))
+    return BinStats(
+        low,
+        high,
+        len(members),
+        successes,
+        ci[0],
+        ci[1],
+        float(np.percentile(forces, 95)) if forces else math.nan,
+        max(forces) if forces else math.nan,
+        dict(Counter(str(r.get("failure_class", "none")) for r in members)),
+    )

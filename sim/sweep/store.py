@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 from typing import Any
+
+from sim.strict_json import strict_dumps
 
 __all__ = ["EpisodeStore"]
 
@@ -52,7 +53,7 @@ class EpisodeStore:
     def append(self, record: dict[str, Any]) -> None:
         """Record one finished trial durably."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        line = json.dumps(_json_safe(record), sort_keys=True, allow_nan=False) + "\n"
+        line = strict_dumps(record, sort_keys=True) + "\n"
         with self.path.open("a") as handle:
             handle.write(line)
             handle.flush()
@@ -62,16 +63,3 @@ class EpisodeStore:
     def ordered(self) -> list[dict[str, Any]]:
         """All records by trial index."""
         return [self.records[i] for i in sorted(self.records)]
-
-
-def _json_safe(value: Any) -> Any:
-    """Non-finite floats become None (strict JSON has no NaN); containers are converted recursively."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    if hasattr(value, "item") and callable(value.item):  # numpy scalars
-        return _json_safe(value.item())
-    return value

@@ -11,11 +11,13 @@ from pathlib import Path
 import gymnasium as gym
 import pytest
 
+from policies.algos import Dims, make_agent
+from policies.budget import FINISH_RESERVE_S, Budget
 from policies.checkpoint import load_checkpoint, load_policy
 from policies.config import ALGORITHMS, TrainConfig
 from policies.recipe import DEFAULT_RECIPE
 from policies.toy_env import TOY_TASK_ID
-from policies.trainer import _FINISH_RESERVE_S, RunSpec, _Budget, train
+from policies.trainer import RunSpec, ensure_registered, evaluate, train
 from psm_control.errors import ConfigurationError
 from tissue_retract.cli import main
 
@@ -196,15 +198,43 @@ def test_a_budget_ends_with_the_best_evaluated_policy(tmp_path: Path, capsys: py
 def test_the_budget_keeps_room_for_the_next_episode_the_last_evaluation_and_the_exit() -> None:
     """Each estimate is the last measured one; before any evaluation, its episodes at twice the step time."""
     now = [0.0]
-    budget = _Budget(10.0, started_s=0.0, clock=lambda: now[0])
+    budget = Budget(10.0, started_s=0.0, clock=lambda: now[0])
     budget.episode_s, budget.step_s = 0.5, 0.01  # an evaluation of 3 x 50 steps: estimated 3 s
-    now[0] = 10.0 - 0.5 - 3.0 - _FINISH_RESERVE_S  # the latest time the next episode still fits
+    now[0] = 10.0 - 0.5 - 3.0 - FINISH_RESERVE_S  # the latest time the next episode still fits
     assert budget.fits_episode(3, 50)
     now[0] += 0.01
     assert not budget.fits_episode(3, 50)
     budget.evaluation_s = 1.0  # measured: replaces the estimate
     assert budget.fits_episode(3, 50)
-    assert _Budget(None, started_s=0.0, clock=lambda: 1e9).fits_episode(3, 50)
+    assert Budget(None, started_s=0.0, clock=lambda: 1e9).fits_episode(3, 50)
+
+
+def test_an_evaluation_the_budget_cannot_hold_is_cut_short_after_at_least_one_episode() -> None:
+    """Out of time: the evaluation stops between episodes and says over how many its success rate is."""
+    task = ensure_registered(TOY_TASK_ID)
+    env = gym.make(task)
+    agent = make_agent(Dims(*_toy_dims(env)), TrainConfig(algo="ddpg"), seed=0)
+    try:
+        calls = iter([False, False, True])
+        success, ran = evaluate(agent, env, 10, out_of_time=lambda: next(calls))
+        assert ran == 3 and 0.0 <= success <= 1.0
+        assert evaluate(agent, env, 2, out_of_time=lambda: True)[1] == 1
+    finally:
+        env.close()
+
+
+def test_demonstrations_stop_when_the_budget_ends_and_progress_is_shown(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Asked for far more demonstrations than a 6 s budget holds, the run collects fewer, says so, and ends."""
+    args = ["train", "--task", TOY_TASK_ID, "--demos", "100000", "--budget-s", "6", "--eval-episodes", "3"]
+    args += ["--out", str(tmp_path), "--no-tensorboard"]
+    assert main(args) == 0
+    captured = capsys.readouterr()
+    assert "demonstrations:" in captured.err  # the progress bar of the collection
+    line = next(line for line in captured.out.splitlines() if line.startswith("demonstrations: "))
+    assert int(line.split()[1]) < 100000 and "of 100000 (the budget ended their collection)" in line
+    assert "budget 6 s:" in captured.out
 
 
 def test_a_budget_outside_its_range_is_refused_with_what_is_allowed(capsys: pytest.CaptureFixture[str]) -> None:
@@ -247,3 +277,12 @@ def test_without_algo_the_recipe_trains_in_a_worker_and_stops_at_its_target(
 def test_a_stopping_target_that_is_no_success_rate_is_refused(target: object) -> None:
     with pytest.raises(ConfigurationError, match="a success rate in"):
         RunSpec(TOY_TASK_ID, stop_at_success=target)  # type: ignore[arg-type]
+
+
+def _toy_dims(env: gym.Env) -> tuple[int, int, int]:  # type: ignore[type-arg]
+    spaces = env.observation_space
+    return (
+        int(spaces["observation"].shape[0]),  # type: ignore[index]
+        int(spaces["desired_goal"].shape[0]),  # type: ignore[index]
+        int(env.action_space.shape[0]),  # type: ignore[index]
+    )

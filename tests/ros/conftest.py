@@ -1,17 +1,20 @@
 """Loopback-only ROS 2 for the tests: set before rclpy is imported, and rclpy is required.
 
-Every test of this folder talks real rclpy over loopback DDS, on a domain id of this test run's own
-(from its pid), with discovery limited to localhost and UDPv4 only. rclpy is imported here at module
-level on purpose: without the ``ros`` extra these tests fail at collection instead of being skipped.
+Every test of this folder talks real rclpy over loopback DDS, on a domain id of this test process's own
+(``domains.py``: each pytest-xdist worker has a block of domains), with discovery limited to localhost
+and UDPv4 only. rclpy is imported here at module level on purpose: without the ``ros`` extra these
+tests fail at collection instead of being skipped.
 """
 
 from __future__ import annotations
 
 import os
 
-from hardware_if.network import apply_local_ros_env, run_domain_id
+from domains import worker_domain_id
 
-DOMAIN_ID = run_domain_id()
+from hardware_if.network import apply_local_ros_env
+
+DOMAIN_ID = worker_domain_id()
 apply_local_ros_env(DOMAIN_ID)
 
 import pytest  # noqa: E402

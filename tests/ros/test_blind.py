@@ -42,10 +42,12 @@ def _truth(path: Path) -> list[dict[str, Any]]:
 
 @pytest.fixture(scope="module")
 def blind_run(tmp_path_factory: pytest.TempPathFactory, ros_env: dict[str, str]) -> dict[str, Any]:
-    """sim-dvrk --blind: its start-up lines, a registration of the arm at rest, then one blind deploy."""
+    """sim-dvrk --blind with the jaws on the site: its start-up lines, a registration, a deploy on it."""
     folder = tmp_path_factory.mktemp("blind")
     truth = folder / "truth.jsonl"
-    sim = start_sim_dvrk(ros_env, "--task", "lift", "--seed", SEED, "--blind", "--truth", str(truth))
+    sim = start_sim_dvrk(
+        ros_env, "--task", "lift", "--seed", SEED, "--blind", "--truth", str(truth), "--place-jaws-on", "site"
+    )
     assert sim.stdout is not None
     lines: list[str] = []
     try:
@@ -68,8 +70,8 @@ def blind_run(tmp_path_factory: pytest.TempPathFactory, ros_env: dict[str, str])
             "dvrk",
             "--task",
             "lift",
-            "--site",
-            *_point(lines, "site"),
+            "--registration",
+            str(folder / "registration.json"),
             "--goal",
             *_point(lines, "goal"),
             "--record",
@@ -127,11 +129,13 @@ def test_blind_sim_dvrk_serves_no_task_topic_and_prints_site_and_goal(blind_run:
 
 
 def test_register_records_the_grasp_point_of_the_arm(blind_run: dict[str, Any]) -> None:
-    """register prints and writes the grasp point within 0.5 mm of where PyBullet has the jaws."""
+    """register on jaws placed on the site: the grasp point within 0.5 mm of PyBullet's, and of the true site."""
     registered = blind_run["registered"]
     assert registered.returncode == 0, registered.stdout + registered.stderr
+    assert "warning" not in registered.stderr, registered.stderr
     site = np.array([float(v) for v in _point(registered.stdout.splitlines(), "site")])
     assert np.linalg.norm(site - np.array(blind_run["truth_at_registration"]["grasp_point"])) < 5e-4
+    assert np.linalg.norm(site - np.array(blind_run["truth_at_registration"]["site"])) < 5e-4
     saved = json.loads(blind_run["registration"].read_text())
     assert saved["arm"] == "PSM1" and np.allclose(saved["site_m"], site, atol=1e-5)
 
@@ -152,3 +156,16 @@ def test_a_blind_episode_senses_the_grasp_with_the_jaw_and_lifts_the_flap(blind_
     assert len(observed) == 50 and sum(observed) >= 10, "the deploy sensed a grasp it held for 10+ steps"
     lifted = truth[-1]["site"][2] - truth[0]["site"][2]
     assert truth[-1]["grasped"] and lifted > 0.005, f"the held site rose {lifted * 1000:.1f} mm"
+
+
+def test_register_refuses_jaws_that_are_not_on_the_tissue(ros_env: dict[str, str]) -> None:
+    """Against sim-dvrk --blind with the arm at its start (14 cm from the site), register refuses in numbers."""
+    sim = start_sim_dvrk(ros_env, "--task", "lift", "--seed", SEED, "--blind")
+    try:
+        registered = _run(ros_env, "register", "--wait", "60")
+    finally:
+        stop(sim)
+    assert registered.returncode == 1, registered.stdout + registered.stderr
+    assert "outside the workspace box about the RCM: z = " in registered.stderr, registered.stderr
+    assert "not registered: the jaws were at" in registered.stderr and "site:" not in registered.stdout
+    assert "Traceback" not in registered.stderr

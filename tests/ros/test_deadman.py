@@ -30,6 +30,7 @@ def test_fresh_enabled_homed_tracking_arm_is_ok() -> None:
         ({"measured_rx_s": 9.5}, "stale"),
         ({"publishers": 0}, "publisher gone"),
         ({"publishers": 2}, "publisher conflict"),
+        ({"conflict": "another commander: /teleop publishes /PSM1/servo_jp"}, "another commander: /teleop"),
         ({"data_fault": "invalid data: measured_js: non-finite yaw"}, "invalid data: measured_js"),
         ({"measured_rx_s": None, "measured_q": None}, "no measurement"),
         ({"state": "DISABLED"}, "not ready"),

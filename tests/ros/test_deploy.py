@@ -121,10 +121,12 @@ def test_dry_run_publishes_nothing_on_motion_topics(
     counts = dict.fromkeys(MOTION_TOPICS, 0)
     rclpy.init()
     try:
-        with PsmClient("PSM1", node_name=f"dry_run_watch_{time.monotonic_ns()}") as psm:
-            psm.wait_for_measurement(timeout_s=60.0)
-            psm.enable(timeout_s=20.0)
-            psm.home(timeout_s=20.0)
+        with PsmClient("PSM1", node_name=f"dry_run_enable_{time.monotonic_ns()}") as operator:
+            operator.wait_for_measurement(timeout_s=60.0)
+            operator.enable(timeout_s=20.0)
+            operator.home(timeout_s=20.0)
+        # The watcher only listens: a node with command publishers would be another commander to the deploy.
+        with PsmClient("PSM1", node_name=f"dry_run_watch_{time.monotonic_ns()}", listen_only=True) as psm:
             topics = ArmTopics("PSM1")
             lock = threading.Lock()
 
@@ -148,11 +150,27 @@ def test_dry_run_publishes_nothing_on_motion_topics(
     assert deploy.returncode == 0, output
     assert counts == dict.fromkeys(MOTION_TOPICS, 0), counts
     assert "dry run (nothing published on motion topics)" in output
+    assert "PSM1: operating state ENABLED, homed" in output
     assert "would have sent" in output and "predicted peak force" in output
     recording = load_recording(record)
     summary = summarize_recording(recording)
     assert summary.dry_run and summary.commands > 0 and summary.commands_sent == 0
     assert recording.report["commands_sent"] == 0
+
+
+def test_dry_run_on_a_fresh_console_says_at_once_what_it_waits_for(
+    sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    """A dry run on a DISABLED arm prints the state it sees and how to enable and home before it waits."""
+    deploy = _deploy(ros_env, tmp_path / "dry.mcap", "--dry-run", "--wait", "3")
+    output, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
+    assert deploy.returncode == EXIT_HOLD, output
+    lines = output.splitlines()
+    state = next(i for i, line in enumerate(lines) if "PSM1: operating state" in line)
+    assert lines[state].endswith("operating state DISABLED, not homed"), lines[state]
+    hint = lines[state + 1]
+    assert "waiting up to 3 s" in hint and "never enables or homes" in hint and "arm.home(" in hint, hint
+    assert "nan" not in output.lower(), output
 
 
 def test_killing_sim_dvrk_mid_episode_holds_and_reports(

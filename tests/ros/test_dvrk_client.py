@@ -8,15 +8,14 @@ simulator's start-up line, the client's exit; the client's own checks wait on th
 from __future__ import annotations
 
 import json
-import os
 import re
 import time
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
+from domains import CLIENT_OFFSET, worker_domain_id
 from dvrk_client import SCRIPTS_HERE, Process, client_dir, missing, run_client, start_sim
-
-from hardware_if.network import run_domain_id
 
 #: The client's own scripts that must run to completion, with the input they ask for.
 SCRIPTS = {
@@ -35,7 +34,7 @@ def _client_present() -> None:
 
 
 def _domain(offset: int) -> int:
-    return run_domain_id(os.getpid() + 17 * (offset + 1))
+    return worker_domain_id(CLIENT_OFFSET + offset)
 
 
 @pytest.fixture
@@ -107,3 +106,24 @@ def test_dvrk_script_runs_to_completion_on_a_task_scene(script: str) -> None:
     assert "Traceback" not in checked and "failed" not in checked.lower(), output
     assert sim_status == 0, sim.output()
     print(f"{script}: {wall_s:.1f} s wall, {waits}")
+
+
+@pytest.mark.parametrize("wrench", ["dvrk", "ideal"])
+def test_client_reads_the_console_force_estimate_in_free_space(wrench: str) -> None:
+    """body.measured_cf in free space: the dvrk model's is finite, not zero and moves with pose; ideal's is ~0."""
+    domain = _domain(5 if wrench == "dvrk" else 6)
+    sim = start_sim(domain, "--wrench", wrench)
+    try:
+        output = _finish(run_client(SCRIPTS_HERE / "dvrk_client_wrench.py", domain, "PSM1"), 120.0)
+    finally:
+        assert sim.stop() == 0, sim.output()
+    match = re.search(r"^WRENCH (.*)$", output, flags=re.MULTILINE)
+    assert match is not None, output
+    forces = {name: np.asarray(value) for name, value in json.loads(match.group(1)).items()}
+    assert all(np.all(np.isfinite(f)) for f in forces.values()), forces
+    if wrench == "ideal":
+        assert all(np.linalg.norm(f) < 0.01 for f in forces.values()), forces
+    else:
+        assert all(np.linalg.norm(f) > 0.05 for f in forces.values()), forces
+        assert np.linalg.norm(forces["first"] - forces["second"]) > 0.05, forces
+        assert np.linalg.norm(forces["moving"] - forces["second"]) > 0.01, forces

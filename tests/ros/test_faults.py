@@ -15,8 +15,8 @@ import sys
 from pathlib import Path
 
 import pytest
+from domains import FAULT_OFFSET, worker_domain_id
 
-from hardware_if.network import run_domain_id
 from tissue_retract.faults import FAULTS, Fault, run_fault
 
 
@@ -24,7 +24,7 @@ from tissue_retract.faults import FAULTS, Fault, run_fault
 @pytest.mark.parametrize("fault", FAULTS, ids=[f.name for f in FAULTS])
 def test_fault_ends_in_a_recorded_hold(fault: Fault, tmp_path: Path) -> None:
     """The fault ends with its exit status and reason, no traceback, and the hold in the recording."""
-    domain = 1 + (run_domain_id() + FAULTS.index(fault)) % 100  # a domain of this server's own (not the run's)
+    domain = worker_domain_id(FAULT_OFFSET + FAULTS.index(fault))  # a domain of this server's own
     result = run_fault(fault, tmp_path, domain)
     assert result.status == fault.status, result.output
     assert not result.traceback, result.output

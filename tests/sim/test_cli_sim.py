@@ -13,7 +13,7 @@ import pytest
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "tissue_retract", *args], capture_output=True, text=True, timeout=300, check=False
+        [sys.executable, "-m", "tissue_retract", *args], capture_output=True, text=True, timeout=900, check=False
     )
 
 
@@ -58,6 +58,76 @@ def test_evaluate_writes_the_documented_json(tmp_path: Path) -> None:
     for key in ("joint_limit_violations", "safety_stops", "interventions"):
         assert isinstance(summary[key], int)
     assert {"seed", "success", "steps", "peak_force_n", "failure_class"} <= set(report["episodes"][0])
+
+
+def test_evaluate_episodes_is_the_total_and_progress_is_shown(tmp_path: Path) -> None:
+    """`--episodes 4` with the default three seeds runs 4 episodes in all, says so as they end, with a Wilson CI."""
+    path = tmp_path / "eval.json"
+    result = _cli("evaluate", "--policy", "scripted", "--task", "lift", "--episodes", "4", "--json", str(path))
+    assert result.returncode == 0, result.stderr
+    report = json.loads(path.read_text())
+    assert report["summary"]["episodes"] == 4
+    assert [e["seed"] for e in report["episodes"]] == [100000, 200000, 300000, 100001]
+    assert "evaluate: 4/4 episodes" in result.stderr
+    assert "95 % CI" in result.stdout and "+-" not in result.stdout
+
+
+def test_ctrl_c_keeps_the_finished_episodes_in_the_json(tmp_path: Path) -> None:
+    """Ctrl-C during an evaluation exits 130 and writes --json with the episodes that finished."""
+    import signal
+
+    path = tmp_path / "eval.json"
+    command = [sys.executable, "-m", "tissue_retract", "evaluate", "--policy", "scripted", "--task", "lift"]
+    process = subprocess.Popen(
+        [*command, "--episodes", "1000", "--json", str(path)], stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    assert process.stderr is not None
+    for line in process.stderr:  # the first progress line: an episode has finished
+        if line.startswith("evaluate: 1/1000 episodes"):
+            break
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=300)
+    assert process.returncode == 130, stderr
+    report = json.loads(path.read_text())
+    assert report["summary"]["interrupted"] is True and len(report["episodes"]) >= 1
+    assert "Traceback" not in stderr
+
+
+@pytest.mark.parametrize("command", ["evaluate", "robustness", "tune-safety", "deploy"])
+def test_every_policy_help_names_pretrained(command: str) -> None:
+    """Every --policy help line lists pretrained, which the README uses."""
+    result = _cli(command, "--help")
+    assert result.returncode == 0
+    assert "pretrained" in " ".join(result.stdout.split()), result.stdout
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("--help",),
+        ("evaluate", "--help"),
+        ("evaluate", "--policy", "scripted", "--task", "lift", "--episodes", "1"),
+        (
+            "robustness",
+            "--policy",
+            "scripted",
+            "--task",
+            "lift",
+            "--trials",
+            "2",
+            "--jobs",
+            "2",
+            "--vary",
+            "latency=0:1",
+        ),
+    ],
+)
+def test_no_pybullet_build_line_in_the_output(argv: tuple[str, ...], tmp_path: Path) -> None:
+    """Neither a command nor its sweep workers print PyBullet's build-time line (it went to stderr)."""
+    extra = ("--out", str(tmp_path / "sweep")) if argv[0] == "robustness" else ()
+    result = _cli(*argv, *extra)
+    assert result.returncode == 0, result.stderr
+    assert "pybullet build time" not in result.stdout + result.stderr
 
 
 def test_evaluate_rejects_unknown_policy_and_task() -> None:

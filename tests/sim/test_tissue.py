@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pybullet as p
@@ -56,3 +60,19 @@ def test_a_site_is_bound_to_the_first_triangle_holding_it(client: int) -> None:
             np.testing.assert_array_equal(triangle, expected_triangle)
             np.testing.assert_array_equal(weights, expected_weights)
             np.testing.assert_allclose(weights @ rest[triangle], point, atol=1e-12)
+
+
+def test_temporary_mesh_folders_of_ended_processes_do_not_accumulate(tmp_path: Path) -> None:
+    """A process killed before its exit handlers leaves its folder; the next process to make one removes it."""
+    script = "import os, sim.tissue as t; print(os.path.dirname(t.texture_file(1)), flush=True); os._exit(0)"
+    env = dict(os.environ, TMPDIR=str(tmp_path))
+
+    def folder_of_a_killed_process() -> Path:
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+        return Path(done.stdout.strip().splitlines()[-1])
+
+    first = folder_of_a_killed_process()
+    assert first.is_dir() and first.parent == tmp_path
+    second = folder_of_a_killed_process()
+    assert not first.exists() and second.is_dir()
+    assert [path.name for path in tmp_path.iterdir()] == [second.name]

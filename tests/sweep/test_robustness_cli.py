@@ -7,6 +7,7 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from tests.conftest import run_cli
 
@@ -51,6 +52,7 @@ def test_unknown_parameter_is_refused_with_valid_names(tmp_path: Path) -> None:
     assert not (tmp_path / "episodes.jsonl").exists()
 
 
+@pytest.mark.xdist_group("ray")  # one local Ray cluster at a time: these run on one worker
 def test_simulation_sweep_is_identical_on_local_and_ray(tmp_path: Path) -> None:
     """The same robustness sweep of the real simulation gives identical episode records on both backends."""
     records = {}
@@ -72,3 +74,37 @@ def test_multiplier_of_a_zero_nominal_is_refused(tmp_path: Path) -> None:
     assert result.returncode == 1
     assert "joint_offset" in result.stderr and "absolute" in result.stderr
     assert not (tmp_path / "episodes.jsonl").exists()
+
+
+def _strict(text: str) -> object:
+    """Parse JSON as a strict parser does: NaN and Infinity are errors."""
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"non-standard JSON constant {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_latency_is_swept_and_binned_in_whole_steps_and_outputs_are_strict_json(tmp_path: Path) -> None:
+    """latency takes whole policy steps in episodes and report bins; summary/sweep JSON parse strictly; the
+    shipped policy's sha256 is recorded for pretrained."""
+    import hashlib
+
+    from policies.shipped import shipped_policy_path
+
+    result = run_cli(
+        "robustness", "--policy", "pretrained", "--task", "lift", "--trials", "6", "--jobs", "2", "--no-progress",
+        "--vary", "latency=0:2", "--out", str(tmp_path),
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    records = [_strict(line) for line in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    assert all(float(r["params"]["latency"]).is_integer() for r in records)  # type: ignore[index]
+    summary = _strict((tmp_path / "summary.json").read_text())
+    assert isinstance(summary, dict) and "stall_static_load_n" in summary
+    sweep = _strict((tmp_path / "sweep.json").read_text())
+    digest = hashlib.sha256(shipped_policy_path("TissueRetract-Lift-v0").read_bytes()).hexdigest()
+    assert isinstance(sweep, dict) and sweep["policy_sha256"] == digest
+    report = (tmp_path / "report.md").read_text()
+    labels = {line.split("|")[1].strip() for line in report.splitlines() if "policy steps |" in line}
+    assert labels and labels <= {"0 policy steps", "1 policy steps", "2 policy steps"}, report
+    assert "success" in result.stdout and "95 % CI" in result.stdout

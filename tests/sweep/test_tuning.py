@@ -10,7 +10,15 @@ import pytest
 from psm_control.errors import ConfigurationError, UnknownVariantError
 from safety.config import load_safety_config
 from sim.sweep import parse_ranges
-from sim.tuning import SettingResult, pareto_front, recommend, setting_results, tunable_fields, tuning_trials
+from sim.tuning import (
+    SettingResult,
+    pareto_front,
+    recommend,
+    recommendation_warnings,
+    setting_results,
+    tunable_fields,
+    tuning_trials,
+)
 from tests.conftest import run_cli
 
 
@@ -25,11 +33,26 @@ def test_pareto_front_keeps_only_undominated_settings() -> None:
 
 
 def test_recommendation_respects_the_force_bound() -> None:
-    """The recommendation is the most successful setting under the bound, or none when none is under it."""
-    a, b, c = _result(1, 5, 0.5), _result(2, 8, 0.9), _result(3, 10, 1.2)
+    """The recommendation is the most successful setting with limit and peak under the bound, or none."""
+    a, b, c = _result(0.5, 5, 0.4), _result(0.9, 8, 0.8), _result(1.2, 10, 1.1)
     assert recommend([a, b, c], 1.0) is b
     assert recommend([a, b, c], 2.0) is c
-    assert recommend([a, b, c], 0.4) is None
+    assert recommend([a, b, c], 0.3) is None
+
+
+def test_recommendation_never_has_a_limit_above_the_bound() -> None:
+    """A setting whose force limit exceeds the bound is never recommended, however low its observed peaks."""
+    low_limit, high_limit = _result(0.5, 6, 0.45), _result(3.0, 10, 0.768)
+    assert recommend([low_limit, high_limit], 1.5) is low_limit
+    assert recommend([high_limit], 1.5) is None
+
+
+def test_a_weak_recommendation_says_why() -> None:
+    """Few episodes, low success and a wide 95 % CI are each named; a strong recommendation has no warning."""
+    weak = SettingResult({"force_limit_n": 0.5}, 8, 2, 0.4, 0.2, 0, 0)
+    text = " ".join(recommendation_warnings(weak))
+    assert "8 episodes" in text and "success 25 %" in text and "95 % CI 7-59 %" in text
+    assert recommendation_warnings(SettingResult({"force_limit_n": 1.0}, 100, 97, 0.9, 0.5, 0, 0)) == []
 
 
 def test_trials_share_seeds_across_settings() -> None:
@@ -81,3 +104,17 @@ def test_tune_safety_writes_a_loadable_recommendation(tmp_path: Path) -> None:
     assert config.force_limit_n == pytest.approx(summary["recommended"]["force_limit_n"])
     assert (tmp_path / "pareto.png").stat().st_size > 1000
     assert "Pareto" in (tmp_path / "settings.md").read_text()
+
+
+def test_tune_safety_never_writes_a_limit_above_the_bound(tmp_path: Path) -> None:
+    """With --max-force-n 1.5 the written limit is at most 1.5 N and the report shows the 95 % CI."""
+    result = run_cli(
+        "tune-safety", "--policy", "scripted", "--task", "lift", "--grid", "force_limit_n=0.5:3", "--levels", "3",
+        "--episodes", "2", "--jobs", "2", "--max-force-n", "1.5", "--out", str(tmp_path), "--no-progress",
+    )  # fmt: skip
+    assert "Traceback" not in result.stderr
+    if result.returncode == 0:
+        assert load_safety_config(tmp_path / "recommended_safety.yaml").effective_force_limit_n <= 1.5
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary.get("recommended", {}).get("force_limit_n", 0.0) <= 1.5
+    assert "95 % CI" in result.stdout and "WARNING: weak recommendation: only 2 episodes" in result.stdout

@@ -11,10 +11,13 @@ Pinocchio start-up for nothing, and ``--help`` would need every optional extra.
 from __future__ import annotations
 
 import argparse
+import atexit
 import contextlib
 import faulthandler
 import importlib
+import os
 import shlex
+import signal
 import sys
 from collections.abc import Callable, Mapping, Sequence
 
@@ -28,17 +31,38 @@ SUBCOMMANDS: dict[str, str] = {
     "demo": "run scripted-expert episodes (record demos, video); --kinematics: the FK cross-check",
     "train": "train a policy (DDPG+HER, SQIL, DDPGBC, CoL, DEX) on a task",
     "evaluate": "evaluate a policy on a task",
+    "train-perception": "train the endoscope's site estimator on randomized renders",
     "deploy": "deploy a policy to the simulation or a dVRK over ROS 2",
     "robustness": "randomized robustness evaluation of a policy",
     "tune-safety": "sweep safety limits and recommend a configuration",
     "tissue-test": "tension and shear tests of the flap's material, against the closed forms",
     "reproduce": "train and evaluate the paper's Tables 1 and 2",
+    "calibrate-wrench": "fit the dVRK's force-sensing errors in free space (for deploy --wrench-calibration)",
     "register": "register the grasp site by holding the jaws on it (for deploy --site)",
     "sim-dvrk": "serve the dVRK's CRTK topics from the simulation",
     "replay": "summarise and plot a recorded run",
     "bench": "measure speed (env, chain, ros, train) and run the fault matrix (faults)",
     "safety": "show the effective safety limits",
 }
+
+
+#: Commands that run for long and stop on SIGINT or SIGTERM with handlers of their own, whatever the
+#: disposition they inherited (exit 130 or 143; what finished is kept, see :mod:`sim.sweep.stopping`).
+SWEEP_COMMANDS = ("robustness", "tune-safety", "reproduce", "train")
+
+
+def _exit_now(status: int) -> None:
+    """End a stopped sweep at once: exit handlers run, the loaded modules (torch) are not torn down.
+
+    Tearing down torch and the simulation took 1.5 s on an idle machine and over 4 s on a loaded one,
+    more than a stop may take; what matters at exit (temporary files, the pool's semaphores, output) is
+    done by the exit handlers and the flush.
+    """
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(status)
 
 
 def module_name(command: str) -> str:
@@ -107,14 +131,23 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     args.command_line = shlex.join(["tissue-retract", *arguments])  # for reports: what exactly ran
+    stopping: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
+    if args.command in SWEEP_COMMANDS:
+        from sim.sweep.stopping import stop_signals  # these commands load the simulation anyway
+
+        stopping = stop_signals()
     try:
-        return int(args.func(args))
+        with stopping:
+            return int(args.func(args))
     except TissueRetractError as e:
         print(f"tissue-retract {args.command}: error: {e}", file=sys.stderr)
         return 1
     except OSError as e:  # a file the user named could not be read or written (disk full, permissions)
         print(f"tissue-retract {args.command}: error: {e.strerror or e}: {e.filename or ''}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         print(f"tissue-retract {args.command}: interrupted", file=sys.stderr)
-        return 130
+        status = 128 + int(getattr(e, "signum", signal.SIGINT))  # 130 for Ctrl-C, 143 for SIGTERM
+        if args.command in SWEEP_COMMANDS:
+            _exit_now(status)
+        return status

@@ -14,6 +14,7 @@ from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from sim.envs import gym_id, make
 from sim.expert import ScriptedExpert
+from tissue_retract.cli._camera import tissue_params
 
 __all__ = ["run_episodes"]
 
@@ -28,7 +29,7 @@ def run_episodes(args: argparse.Namespace) -> int:
         if not args.video.endswith((".gif", ".mp4")):
             raise ConfigurationError("--video", args.video, "a .gif or .mp4 file")
         check_output_path(args.video, "--video", (args.out,))
-    env = make(args.task)
+    env = make(args.task, tissue=tissue_params(args.texture))
     expert = ScriptedExpert(env)
     kept: list[dict[str, Any]] = []
     frames: list[Any] = []

@@ -8,11 +8,12 @@ endoscope render every step. Pin it to one core to compare with the paper's abou
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
+from pathlib import Path
 
 from sim.envs import make
+from sim.strict_json import write_strict_json
 
 __all__ = ["add_arguments", "run"]
 
@@ -81,6 +82,5 @@ def run(args: argparse.Namespace) -> int:
         f"cpus allowed {results['cpus_allowed']}, load {results['load_average_1min']:.2f}"
     )
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(results, f, indent=2)
+        write_strict_json(Path(args.json), results)
     return 0

@@ -12,12 +12,12 @@ recording. Exit status 0 when every fault ended as expected, 1 otherwise.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
 
 from hardware_if.network import apply_local_ros_env, run_domain_id
+from sim.strict_json import write_strict_json
 
 __all__ = ["add_arguments", "run"]
 
@@ -68,5 +68,5 @@ def run(args: argparse.Namespace) -> int:
     passed = sum(r["ok"] for r in rows)
     print(f"{passed}/{len(rows)} faults ended as expected; files in {root}")
     if args.json:
-        Path(args.json).write_text(json.dumps({"faults": rows}, indent=2))
+        write_strict_json(Path(args.json), {"faults": rows})
     return 0 if passed == len(rows) else 1

@@ -9,12 +9,12 @@ is tagged by a distinct roll angle. It prints p50/p99 latency and the commands n
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,6 +22,7 @@ import numpy as np
 from hardware_if.network import apply_local_ros_env, run_domain_id
 from hardware_if.session import ros_session
 from psm_control.commands import JointCommand
+from sim.strict_json import write_strict_json
 
 __all__ = ["add_arguments", "run"]
 
@@ -142,6 +143,5 @@ def run(args: argparse.Namespace) -> int:
         "results": results,
     }
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(report, f, indent=2)
+        write_strict_json(Path(args.json), report)
     return 0

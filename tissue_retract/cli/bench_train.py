@@ -11,7 +11,6 @@ over the seeds (not reached counts as slower than any time).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import statistics
 import subprocess
@@ -20,6 +19,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from sim.strict_json import write_strict_json
 from tissue_retract.cli._checks import MAX_EPISODES, check_out_folder, float_in, int_in
 
 __all__ = ["add_arguments", "run"]
@@ -82,8 +82,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         for s in summary.values():  # JSON has no infinity
             s["median_s"] = None if math.isinf(s["median_s"]) else s["median_s"]
-        with open(args.json, "w") as f:
-            json.dump({"runs": rows, "summary": summary, "target": args.target}, f, indent=2)
+        write_strict_json(Path(args.json), {"runs": rows, "summary": summary, "target": args.target})
     return 0
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-import pybullet as p
 from rich.console import Console
 from rich.table import Table
 
@@ -26,6 +25,8 @@ from psm_control.robot import PsmModel
 from psm_control.spec import ARMS, TOOLS
 from psm_control.urdf import TOOL_TIP_FRAME
 from sim.psm_body import PsmBody
+from sim.quiet_pybullet import pybullet as p
+from tissue_retract.cli._camera import add_texture_argument
 from tissue_retract.cli._checks import MAX_EPISODES, int_in
 from tissue_retract.cli._demos import run_episodes
 
@@ -44,6 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", metavar="FILE", default=None, help="write successful episodes as .npz demos")
     parser.add_argument("--video", metavar="FILE", default=None, help="record the first episode (.gif or .mp4)")
+    add_texture_argument(parser)
 
 
 def _named_configurations(insertion: float) -> dict[str, np.ndarray]:
@@ -73,7 +75,7 @@ def run_kinematics(args: argparse.Namespace) -> int:
     try:
         body = PsmBody(client, model)
         table = Table(title=f"{model.spec.name}: tool tip about the RCM (dVRK local/measured_cp)")
-        for column in ("configuration", "x [mm]", "y [mm]", "z [mm]", "DH err [m]", "PyBullet err [m]", "cond(J)"):
+        for column in ("configuration", "x [mm]", "y [mm]", "z [mm]", "DH err [m]", "PyBullet err [m]", "cond(J) [-]"):
             table.add_column(column, justify="right" if column != "configuration" else "left")
         worst = 0.0
         for name, q in _named_configurations(model.spec.rcm.cartesian_start_insertion_m).items():

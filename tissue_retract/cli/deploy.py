@@ -15,6 +15,13 @@ observation is assembled from ``measured_cp``, ``jaw/measured_js``, ``body/measu
 
 An arm that is not ENABLED and homed is enabled and homed first (not in a dry run).
 
+One commander per arm (docs/one-commander.md): before anything is sent to the console (its first command
+waits 3.5 s for discovery) and every 0.1 s after, any other node publishing the arm's command topics, or
+a second console, is a hold that names it (``HOLD: another commander: /node publishes /PSM1/servo_jp``).
+Each episode starts from the task's start joints: an arm elsewhere is moved there with ``move_jp`` (a dry
+run holds instead), and a measured pose that stops following the commands holds (tracking divergence).
+A recording that cannot be written is a hold too: ``HOLD: recording failed: <path>: <os error>``.
+
 ``--dry-run`` (dVRK) listens to the live arm and computes, logs and records every command but creates
 no command publisher: nothing is published on servo_jp, servo_cp, move_jp, move_cp, jaw/servo_jp or
 jaw/move_jp. It ends with a report: commands it would have sent, safety interventions, predicted forces.
@@ -45,20 +52,25 @@ import time
 from pathlib import Path
 
 from hardware_if.deploy import DeployOptions, deploy
+from hardware_if.endoscope_stream import DEFAULT_RIG
 from hardware_if.registration import read_registration
+from hardware_if.wrench_calibration import read_calibration
+from policies.resolve import POLICY_NAMES
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from safety.config import MAX_CONTROL_RATE_HZ, MIN_CONTROL_RATE_HZ, load_safety_config
+from tissue_retract.cli._camera import add_perception_argument, add_texture_argument, check_texture, load_perception
 from tissue_retract.cli._checks import MAX_EPISODES, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments, point_argument
+from tissue_retract.cli._sensing import add_force_sensing_argument
 
 __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
-    parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
+    parser.add_argument("--policy", required=True, help=POLICY_NAMES)
     parser.add_argument("--target", required=True, choices=("sim", "dvrk"), help="simulation or a dVRK over ROS 2")
     parser.add_argument("--task", default="lift", help="task id: lift, target, multisite, expose (default: lift)")
     parser.add_argument("--arm", default="PSM1", help="arm name / topic namespace (default: PSM1)")
@@ -72,6 +84,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dry-run", action="store_true", help="compute and record, publish nothing on motion topics")
     parser.add_argument("--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml)")
     parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
+    add_force_sensing_argument(parser)
+    parser.add_argument(
+        "--wrench-calibration",
+        metavar="F.json",
+        default=None,
+        help="dvrk only: the force-sensing calibration calibrate-wrench wrote; the safety filter trusts the force "
+        "to its held-out error (default: the console's uncompensated measured_cf, to its model's error bound)",
+    )
     source = parser.add_mutually_exclusive_group()
     point_argument(
         source, "--site", "dvrk: the registered grasp site [m] in <arm>_base; the task state comes from it and the jaw"
@@ -89,6 +109,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--goal",
         "with --site/--registration: where the site must go [m] in <arm>_base (default: the task's nominal goal)",
     )
+    add_perception_argument(parser)
+    parser.add_argument(
+        "--image-timeout",
+        type=float_in(0.0, 60.0, open_low=True),
+        default=0.5,
+        metavar="SECONDS",
+        help="dvrk with --perception: endoscope images older than this hold the arm (default: 0.5)",
+    )
+    parser.add_argument(
+        "--endoscope-rig",
+        default=DEFAULT_RIG,
+        metavar="RIG",
+        help=f"dvrk with --perception: the stereo rig of /RIG/{{left,right}}/image_raw (default: {DEFAULT_RIG})",
+    )
+    add_texture_argument(parser)
     add_live_argument(parser)
     parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=1, help="episodes (default: 1)")
     parser.add_argument(
@@ -118,6 +153,17 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError("--network", True, "not with --dry-run: dry runs stay on localhost")
     if args.target == "dvrk":
         apply_console_arguments(args)
+        if args.force_sensing != "ideal":
+            raise ConfigurationError(
+                "--force-sensing", args.force_sensing, "sim only: a dVRK senses what its console measures"
+            )
+    elif args.wrench_calibration is not None:
+        raise ConfigurationError("--wrench-calibration", args.wrench_calibration, "dvrk only")
+    sensing_error_n, sensing_source = None, "dvrk measured_cf, uncompensated"
+    if args.wrench_calibration is not None:
+        calibration = read_calibration(args.wrench_calibration)
+        sensing_error_n = calibration.error_bound_n
+        sensing_source = f"dvrk measured_cf, calibrated by {args.wrench_calibration}"
 
     safety_config = None
     if args.safety_config is not None:
@@ -143,7 +189,16 @@ def run(args: argparse.Namespace) -> int:
         live=args.live,
         site=None if site is None else tuple(site),
         goal=None if args.goal is None else tuple(args.goal),
+        force_sensing=args.force_sensing,
+        force_sensing_error_n=sensing_error_n,
+        force_sensing_source=sensing_source,
+        wrench_calibration=calibration if args.wrench_calibration is not None else None,
+        perception=args.perception,
+        image_timeout_s=args.image_timeout,
+        endoscope_rig=args.endoscope_rig,
+        texture=check_texture(args.texture) if args.texture is not None else None,
     )
+    load_perception(args.perception)  # refused here, before anything connects, if it is not a model
     report = deploy(options, echo=lambda line: print(line, flush=True))
     for line in report.lines():
         print(line)

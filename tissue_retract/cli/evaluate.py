@@ -2,7 +2,10 @@
 
 POLICY is ``scripted`` (the rule-based expert), ``random``, ``module:callable`` (a callable taking the
 observation dict and returning an action) or a checkpoint path (loaded by ``policies.checkpoint``).
-Episode seeds are ``S * 100000 + i`` for each ``--seeds`` S and episode i. Every action goes through
+``--episodes N`` is the total: episode k runs on seed ``S * 100000 + k // len(seeds)`` with S the
+``k % len(seeds)``-th of ``--seeds`` (with one seed S, episodes ``S * 100000 + 0 .. N - 1``). Progress goes
+to stderr as episodes finish; Ctrl-C stops after the running episode and still writes ``--json`` with the
+episodes that finished (``"interrupted": true``, exit 130). Every action goes through
 the control chain; ``--safety-config FILE`` (TOML/YAML, as ``tissue-retract safety show``) sets its
 limits, for example ``force_limit_n``; ``--no-safety`` is the ablation without the filter.
 
@@ -11,26 +14,30 @@ observation carries a site registered ``--registration-error-mm`` (default 2) fr
 direction, the episode's goal, a grasp sensed by the jaw stalling on the flap and a site that moves with the
 jaws (:class:`hardware_if.registered_env.RegisteredTask`); success is still the true site's distance. The
 scripted expert reads the simulation itself, so ``--blind`` is for checkpoints and ``module:callable``.
+
+``--perception camera[:MODEL]`` is ``--blind`` with the site estimated from the endoscope's stereo images at
+each episode's start (:class:`hardware_if.perceived_env.PerceivedTask`); the summary gives the estimate's
+error to the true site (``site_error_mm``: median, p95, max). ``--texture FILE.png`` puts an image on the
+flap.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import tempfile
-from pathlib import Path
-from typing import Any
+import time
 
 from rich.console import Console
 from rich.table import Table
 
 import sim.envs
+from hardware_if.perceived_env import PerceivedTask
 from hardware_if.registered_env import RegisteredTask
-from policies.resolve import resolve_policy
+from policies.resolve import POLICY_NAMES, resolve_policy
+from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from safety.config import load_safety_config
+from safety.force_bound import sensing_warning
 from sim.evaluation import (
     EpisodeResult,
     PolicyError,
@@ -41,20 +48,38 @@ from sim.evaluation import (
     timed,
 )
 from sim.scene_stream import LiveScene, StreamScene
+from sim.strict_json import write_strict_json
+from sim.success_interval import describe_success
 from tissue_retract.cli._blind import add_blind_arguments
+from tissue_retract.cli._camera import add_perception_argument, add_texture_argument, load_perception, tissue_params
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, int_in
 from tissue_retract.cli._live import add_live_argument
+from tissue_retract.cli._sensing import add_force_sensing_argument, announce
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["EXIT_INTERRUPTED", "add_arguments", "episode_seeds", "run"]
+
+#: Exit status of an evaluation stopped with Ctrl-C (128 + SIGINT).
+EXIT_INTERRUPTED = 130
+#: A progress line at least this often while episodes end [s] (and at the first, every 5 % and the last).
+PROGRESS_PERIOD_S = 10.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
-    parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
+    parser.add_argument("--policy", required=True, help=POLICY_NAMES)
     parser.add_argument("--task", default="multisite", help="lift, target, multisite, expose (or 1-3, a Gym id)")
-    parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=50, help="episodes per seed (default: 50)")
     parser.add_argument(
-        "--seeds", type=int_in(0, MAX_SEED), nargs="+", default=[1, 2, 3], help=f"seeds 0-{MAX_SEED} (default: 1 2 3)"
+        "--episodes",
+        type=int_in(1, MAX_EPISODES),
+        default=150,
+        help="episodes in all, spread over --seeds in turn (default: 150)",
+    )
+    parser.add_argument(
+        "--seeds",
+        type=int_in(0, MAX_SEED),
+        nargs="+",
+        default=[1, 2, 3],
+        help=f"seeds 0-{MAX_SEED} the episodes are spread over (default: 1 2 3)",
     )
     parser.add_argument("--no-safety", action="store_true", help="ablation: run without the safety filter")
     parser.add_argument(
@@ -67,22 +92,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default_mm=2.0,
         error_help="the registered site's distance from the true one",
     )
+    add_perception_argument(parser)
+    add_texture_argument(parser)
     add_live_argument(parser)
+    add_force_sensing_argument(parser)
     parser.add_argument(
         "--allow-other-task", action="store_true", help="run a checkpoint trained for another task (same spaces)"
     )
 
 
-def write_json(path: Path, data: Any) -> None:
-    """Write JSON atomically: a crash leaves the old file or none, never half a file."""
-    fd, temporary = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as handle:
-            json.dump(data, handle, indent=2)
-        os.replace(temporary, path)
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
+def episode_seeds(seeds: list[int], episodes: int) -> list[int]:
+    """The seeds of ``episodes`` episodes in all, taking ``seeds`` in turn (``S * 100000 + round``)."""
+    return [seeds[k % len(seeds)] * 100000 + k // len(seeds) for k in range(episodes)]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -96,9 +117,22 @@ def run(args: argparse.Namespace) -> int:
     console = Console(width=110)
     if args.no_safety:
         console.print("[bold red]ABLATION: safety filter OFF[/] - commands reach the joints unfiltered")
-    env = sim.envs.make(args.task, safety=not args.no_safety, safety_config=safety_config)
+    if args.blind and args.perception is not None:
+        raise ConfigurationError("--perception", args.perception, "either --blind or --perception, not both")
+    estimator = load_perception(args.perception)
+    env = sim.envs.make(
+        args.task,
+        safety=not args.no_safety,
+        safety_config=safety_config,
+        tissue=tissue_params(args.texture),
+        force_sensing=args.force_sensing,
+    )
+    sensing = sensing_warning(env.unwrapped.safety_config, f"{args.force_sensing} force sensing")
+    announce(sensing)
     if args.blind:
         env = RegisteredTask(env, registration_error_m=args.registration_error_mm / 1000.0)
+    if estimator is not None:
+        env = PerceivedTask(env, estimator)
     live = None
     if args.live is not None:
         live = LiveScene(port=args.live)
@@ -106,18 +140,33 @@ def run(args: argparse.Namespace) -> int:
         print(f"live: ws://127.0.0.1:{live.port} (open it in the Foxglove app)", flush=True)
     results: list[EpisodeResult] = []
     failure: PolicyError | None = None
+    interrupted = False
     try:
         policy, reset = resolve_policy(args.policy, env, allow_other_task=args.allow_other_task)
-        seeds = [s * 100000 + i for s in args.seeds for i in range(args.episodes)]
+        seeds = episode_seeds(args.seeds, args.episodes)
+        report_every = max(1, len(seeds) // 20)
+        started = last_line_s = time.perf_counter()
 
         def episodes() -> None:
-            nonlocal failure
+            nonlocal failure, interrupted, last_line_s
             for seed in seeds:
                 try:
                     results.append(run_episode(env, policy, reset, seed))
                 except PolicyError as e:
                     failure = e
                     return
+                except KeyboardInterrupt:
+                    interrupted = True
+                    return
+                done, now = len(results), time.perf_counter()
+                if done in (1, len(seeds)) or done % report_every == 0 or now - last_line_s >= PROGRESS_PERIOD_S:
+                    last_line_s = now
+                    successes = sum(r.success for r in results)
+                    print(
+                        f"evaluate: {done}/{len(seeds)} episodes, {successes} successes, {now - started:.1f} s",
+                        file=sys.stderr,
+                        flush=True,
+                    )
 
         _, elapsed = timed(episodes)
         controller = env.unwrapped.controller_name
@@ -128,13 +177,16 @@ def run(args: argparse.Namespace) -> int:
             live.close()
     if failure is not None:
         if output is not None:
-            write_json(
+            write_strict_json(
                 output,
                 {"policy_error": str(failure), "episodes": [r.to_dict() for r in results]},
             )
         kept = f"; the {len(results)} episodes before it are in {output}" if output is not None else ""
         print(f"tissue-retract evaluate: error: policy error: {failure}{kept}", file=sys.stderr)
         return 1
+    if interrupted and not results:
+        print("tissue-retract evaluate: interrupted (Ctrl-C) before the first episode ended", file=sys.stderr)
+        return EXIT_INTERRUPTED
     summary = summarize(results, elapsed)
     summary.update(
         task=sim.envs.gym_id(args.task),
@@ -144,17 +196,37 @@ def run(args: argparse.Namespace) -> int:
         safety=not args.no_safety,
         force_limit_n=force_limit_n,
         blind=args.blind,
+        force_sensing=args.force_sensing,
+        force_sensing_error_n=env.unwrapped.safety_config.force_sensing_error_n,
+        warnings=[sensing] if sensing else [],
     )
     if args.blind:
         summary["registration_error_mm"] = args.registration_error_mm
+    if args.perception is not None:
+        summary.update(perception=args.perception, texture=args.texture)
     blind = f", blind: site registered {args.registration_error_mm:g} mm off" if args.blind else ""
-    table = Table(title=f"{args.policy} on {summary['task']} ({summary['episodes']} episodes, {controller}{blind})")
+    if args.perception is not None:
+        blind = f", perception {args.perception}"
+    if interrupted:
+        summary["interrupted"] = True
+    stopped = f", interrupted after {len(results)} of {len(seeds)}" if interrupted else ""
+    table = Table(
+        title=f"{args.policy} on {summary['task']} ({summary['episodes']} episodes{stopped}, {controller}{blind})"
+    )
     table.add_column("metric")
     table.add_column("value", justify="right")
-    table.add_row("success rate", f"{summary['success_rate']:.3f} +- {summary['ci95']:.3f}")
+    table.add_row("success", describe_success(sum(r.success for r in results), len(results)))
     limit = f" (limit {force_limit_n:g} N{'' if summary['safety'] else ', NOT enforced'})"
     table.add_row("peak force [N]", f"{summary['peak_force_n']:.3f}{limit}")
     table.add_row("mean peak force [N]", f"{summary['mean_peak_force_n']:.3f}")
+    if args.force_sensing != "ideal":
+        table.add_row(f"peak sensed force [N] ({args.force_sensing})", f"{summary['peak_measured_force_n']:.3f}")
+        table.add_row("force sensing error bound [N]", f"{summary['force_sensing_error_n']:.3f}")
+    if "site_error_mm" in summary:
+        error = summary["site_error_mm"]
+        table.add_row(
+            "site error [mm]", f"median {error['median']:.2f}, p95 {error['p95']:.2f}, max {error['max']:.2f}"
+        )
     table.add_row("force limit exceeded", describe_exceedances(summary))
     table.add_row("force limit stalled retraction", describe_stalls(summary))
     for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops", "invalid_actions", "interventions"):
@@ -167,5 +239,9 @@ def run(args: argparse.Namespace) -> int:
     table.add_row("env steps/s", f"{summary['env_steps_per_s']:.0f}")
     console.print(table)
     if output is not None:
-        write_json(output, {"summary": summary, "episodes": [r.to_dict() for r in results]})
+        write_strict_json(output, {"summary": summary, "episodes": [r.to_dict() for r in results]})
+    if interrupted:
+        kept = f"; the {len(results)} finished episodes are in {output}" if output is not None else ""
+        print(f"tissue-retract evaluate: interrupted (Ctrl-C){kept}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     return 0

@@ -3,7 +3,9 @@
 Hold the closed jaws on the site (the arm in its clutch or free mode, or moved there by teleoperation) and
 run ``tissue-retract register --arm PSM1``: it listens to the arm (it commands nothing), averages the grasp
 point (midway along the jaws, by the arm's kinematics) over ``--samples`` measurements, refuses if the tool
-moved more than 1 mm meanwhile, and prints ``site: X Y Z`` in metres in ``<arm>_base``. ``--out FILE``
+moved more than 1 mm meanwhile, the jaws are open or the site is outside the chain's workspace box, warns
+when it is far from the depth the tissue lies at (:mod:`hardware_if.registration_checks`), and prints
+``site: X Y Z`` in metres in ``<arm>_base``. ``--out FILE``
 also writes it as JSON for ``deploy --registration FILE``. Discovery stays on localhost unless
 ``--network`` is given, as for ``deploy``.
 """
@@ -11,10 +13,10 @@ also writes it as JSON for ``deploy --registration FILE``. Discovery stays on lo
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 from psm_control.inputs import check_output_path
+from sim.strict_json import write_strict_json
 from tissue_retract.cli._checks import float_in, int_in
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
@@ -43,8 +45,10 @@ def run(args: argparse.Namespace) -> int:
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
     from hardware_if.psm_client import PsmClient
-    from hardware_if.registration import RegistrationError, register_site
+    from hardware_if.registration import RegistrationError, console_base_frame, register_site
+    from hardware_if.registration_checks import check_registration
     from hardware_if.session import ros_session
+    from hardware_if.task_estimate import format_point
 
     with ros_session(), PsmClient(args.arm, listen_only=True, node_name=f"{args.arm.lower()}_register") as client:
         print(f"{args.arm}: hold the closed jaws still on the site", flush=True)
@@ -53,9 +57,17 @@ def run(args: argparse.Namespace) -> int:
         except RegistrationError as e:
             print(f"tissue-retract register: error: {e}", file=sys.stderr)
             return 1
+        findings = check_registration(registration.site_m, console_base_frame(client), client.measure().jaw)
+    refusals = [f.text for f in findings if f.refuse]
+    for finding in findings:
+        kind = "error" if finding.refuse else "warning"
+        print(f"tissue-retract register: {kind}: {finding.text}", file=sys.stderr)
+    if refusals:
+        print(f"  not registered: the jaws were at {format_point(registration.site_m)} m", file=sys.stderr)
+        return 1
     print(registration.line())
     print(f"  frame {args.arm}_base [m], {registration.samples} samples within {registration.spread_m * 1000:.3f} mm")
     if output is not None:
-        output.write_text(json.dumps(registration.to_dict(), indent=2) + "\n")
+        write_strict_json(output, registration.to_dict())
         print(f"  written to {output}")
     return 0

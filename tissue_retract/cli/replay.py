@@ -1,15 +1,18 @@
 """``tissue-retract replay``: summarise a deploy or dry-run recording (MCAP) and plot it.
 
 Prints the duration, the commands computed and sent, safety stops and deadman holds, the peak force, the
-largest tracking error per joint and each episode's result; ``--plot out.png`` draws joint commands
-against measurements and the force over time. Needs no ROS.
+largest tracking error per joint (with its unit) and each episode's result; ``--plot out.png`` draws a
+figure (:mod:`hardware_if.replay_figure`): each episode on its own clock with its boundary and result, the
+force with the force limit, the jaw, the tool tip's tracking error [mm], and the safety filter's
+interventions, safety stops and holds, labelled. Needs no ROS.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from hardware_if.replay import load_recording, plot_recording, summarize_recording
+from hardware_if.replay import load_recording, summarize_recording
+from hardware_if.replay_figure import plot_recording
 
 __all__ = ["add_arguments", "run"]
 
@@ -17,7 +20,12 @@ __all__ = ["add_arguments", "run"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
     parser.add_argument("file", metavar="FILE", help="an .mcap recording written by deploy")
-    parser.add_argument("--plot", metavar="PNG", default=None, help="write a plot of commands, measurements, force")
+    parser.add_argument(
+        "--plot",
+        metavar="PNG",
+        default=None,
+        help="write a figure: force and limit, jaw, tip tracking error, filter events, per episode",
+    )
 
 
 def run(args: argparse.Namespace) -> int:

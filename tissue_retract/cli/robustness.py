@@ -9,7 +9,6 @@ episode, written as it finishes, so an interrupted sweep resumes), ``summary.jso
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -17,15 +16,28 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from policies.resolve import POLICY_NAMES
+from policies.shipped import policy_file
 from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig, load_safety_config
 from sim.envs import gym_id
 from sim.evaluation import describe_exceedances, describe_stalls
-from sim.robustness import check_relative_ranges, parameter_units, sweep_parameters
+from sim.robustness import (
+    check_relative_ranges,
+    integer_parameters,
+    parameter_unit_labels,
+    parameter_units,
+    sweep_parameters,
+    sweep_ranges,
+)
+from sim.strict_json import write_strict_json
+from sim.success_interval import describe_success
 from sim.sweep import EpisodeStore, cap_jobs, file_digest, make_trials, parse_ranges, prepare_output, run_trials
 from sim.sweep.report import summarize, write_report
+from tissue_retract.cli._camera import add_perception_argument, add_texture_argument, check_texture, load_perception
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, int_in
+from tissue_retract.cli._sensing import add_force_sensing_argument, announce
 from tissue_retract.workers import ROBUSTNESS_WORKER, check_sweep_policy
 
 #: Files a robustness sweep writes into ``--out`` (besides its plots).
@@ -36,7 +48,7 @@ __all__ = ["add_arguments", "run"]
 
 def add_sweep_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     """Options every sweep command shares: what to run, where, on how many processes."""
-    parser.add_argument("--policy", required=True, help="scripted, random, module:callable or a checkpoint path")
+    parser.add_argument("--policy", required=True, help=POLICY_NAMES)
     parser.add_argument("--task", required=True, help="task id (lift, target, multisite, expose or a Gymnasium id)")
     parser.add_argument("--seed", type=int_in(0, 2**31 - 1), default=0, help="sweep seed (default 0)")
     parser.add_argument(
@@ -50,6 +62,7 @@ def add_sweep_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     )
     parser.add_argument("--out", type=Path, default=None, help=f"output folder (default runs/{name}-TASK)")
     parser.add_argument("--safety-config", type=Path, default=None, help="SafetyConfig TOML/YAML file")
+    add_force_sensing_argument(parser)
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument(
         "--fresh", action="store_true", help="delete the episodes of an earlier sweep in --out and start over"
@@ -77,6 +90,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--mode", choices=("random", "grid"), default="random", help="sampling (default random)")
     parser.add_argument("--no-safety", action="store_true", help="ablation: run without the safety filter")
+    add_perception_argument(parser)
+    add_texture_argument(parser)
 
 
 def safety_overrides(path: Path | None) -> dict[str, object] | None:
@@ -93,11 +108,17 @@ def safety_overrides(path: Path | None) -> dict[str, object] | None:
     }
 
 
+def _policy_digest(policy: str, task_id: str) -> str | None:
+    """SHA-256 of the file the policy loads (the shipped one for ``pretrained``); None for code policies."""
+    path = policy_file(policy, task_id)
+    return file_digest(path) if path is not None else None
+
+
 def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -> dict[str, object]:
     """What decides a sweep's episodes, as recorded in ``sweep.json``."""
     return {
         "policy": args.policy,
-        "policy_sha256": file_digest(args.policy),
+        "policy_sha256": _policy_digest(args.policy, task_id),
         "task": task_id,
         "seed": args.seed,
         "package_version": __version__,
@@ -108,7 +129,13 @@ def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write its files, print its summary."""
     task_id = gym_id(args.task)
-    ranges = parse_ranges(args.vary, valid_names=sweep_parameters(), units=parameter_units())
+    ranges = parse_ranges(
+        args.vary,
+        valid_names=sweep_parameters(),
+        units=parameter_units(),
+        integers=integer_parameters(),
+        unit_labels=parameter_unit_labels(),
+    )
     check_relative_ranges(ranges)
     count = args.trials ** len(ranges) if args.mode == "grid" else args.trials
     if count > MAX_TRIALS:
@@ -120,7 +147,18 @@ def run(args: argparse.Namespace) -> int:
     jobs = cap_jobs(args.jobs)
     overrides = safety_overrides(args.safety_config)
     out = args.out or Path("runs") / f"robustness-{task_id}"
-    check_sweep_policy(args.policy, task_id, overrides, allow_other_task=args.allow_other_task)
+    declared = sweep_ranges((r.name, r.low, r.high, r.relative) for r in ranges)
+    warning = check_sweep_policy(
+        args.policy,
+        task_id,
+        overrides,
+        allow_other_task=args.allow_other_task,
+        force_sensing=args.force_sensing,
+        tissue_ranges=declared,
+    )
+    announce(warning)
+    texture = check_texture(args.texture) if args.texture is not None else None
+    load_perception(args.perception)  # refused here, before any worker starts, if it is not a model
     check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
     trials = make_trials(ranges, args.trials, mode=args.mode, seed=args.seed)
     kwargs = {
@@ -130,6 +168,10 @@ def run(args: argparse.Namespace) -> int:
         "safety": not args.no_safety,
         "safety_config": overrides,
         "allow_other_task": args.allow_other_task,
+        "force_sensing": args.force_sensing,
+        "tissue_ranges": {k: list(v) for k, v in declared.items()},
+        "perception": args.perception,
+        "texture": texture,
     }
     identity = sweep_identity(
         args,
@@ -139,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
         episodes=args.trials,
         safety=not args.no_safety,
         safety_config=overrides,
+        force_sensing=args.force_sensing,
+        perception=args.perception,
+        texture=texture,
     )
     prepare_output(out, identity, fresh=args.fresh)
     store = EpisodeStore(out / "episodes.jsonl")
@@ -169,9 +214,11 @@ def run(args: argparse.Namespace) -> int:
             "elapsed_s": elapsed,
             "episodes_per_s": ran / elapsed if ran and elapsed > 0 else None,
             "safety": not args.no_safety,
+            "force_sensing": args.force_sensing,
+            "warnings": [warning] if warning else [],
         }
     )
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    write_strict_json(out / "summary.json", summary, sort_keys=True)
     config = SafetyConfig.from_mapping(overrides or {})
     context = {
         "policy": args.policy,
@@ -179,6 +226,7 @@ def run(args: argparse.Namespace) -> int:
         "varied": ", ".join(r.describe() for r in ranges),
         "sampling": f"{args.mode}, {args.trials} trials, seed {args.seed}",
         "safety filter": "on" if not args.no_safety else "OFF (ablation)",
+        "force sensing": args.force_sensing,
     }
     write_report(
         out,
@@ -193,9 +241,9 @@ def run(args: argparse.Namespace) -> int:
     table = Table(title=f"robustness: {args.policy} on {task_id}")
     table.add_column("metric")
     table.add_column("value", justify="right")
-    low, high = summary["ci95"]
+    finished = [r for r in records if "error" not in r]
     table.add_row("episodes (errors)", f"{summary['episodes']} ({summary['errors']})")
-    table.add_row("success", f"{100 * summary['success_rate']:.1f} % [{100 * low:.1f}, {100 * high:.1f}]")
+    table.add_row("success", describe_success(sum(1 for r in finished if r.get("success")), len(finished)))
     table.add_row(
         "peak force max / p95 [N]",
         f"{summary['peak_force_n']['max'] or 0:.3f} / {summary['peak_force_n']['p95'] or 0:.3f}",

@@ -30,13 +30,15 @@ def run(args: argparse.Namespace) -> int:
     """Print the limits of the default or given configuration."""
     config = load_safety_config(args.config) if args.config else SafetyConfig()
     spec = config.spec
-    joints = Table(title=f"{spec.name}: joint limits at {config.control_rate_hz:g} Hz")
-    for column in ("joint", "lower", "upper", "margin", "velocity", "acceleration", "jerk"):
-        joints.add_column(column, justify="left" if column == "joint" else "right")
+    joints = Table(title=f"{spec.name}: joint limits at {config.control_rate_hz:g} Hz (unit: rad, or m for insertion)")
+    columns = ("joint", "unit", "lower", "upper", "margin", "velocity (unit/s)", "accel. (unit/s^2)", "jerk (unit/s^3)")
+    for column in columns:
+        joints.add_column(column, justify="left" if column in ("joint", "unit") else "right")
     lower, upper = config.lower, config.upper
     for i, joint in enumerate(spec.joints):
         joints.add_row(
             joint.dvrk_name,
+            "m" if joint.kind == "prismatic" else "rad",
             f"{lower[i]:.4g}",
             f"{upper[i]:.4g}",
             f"{config.position_margin[i]:.4g}",

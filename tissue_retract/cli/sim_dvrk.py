@@ -16,7 +16,11 @@ and set them for ``deploy --site ... --goal ...``, and reports the jaw as a real
 on the flap it stalls open (0.12 rad) with a squeezing effort on ``jaw/measured_js``. ``--truth FILE``
 writes the scene's true state as JSON lines at the policy rate (``t``, ``grasped``, ``site``,
 ``achieved_goal``, ``goal``, ``grasp_point``, ``distance_m``), to score a blind deploy.
-Needs the ``ros`` extra. Ctrl-C stops it.
+``--place-jaws-on SITE`` (with ``--task``) starts with the closed jaws on the episode's grasp site (``site``)
+or a named one of the flap (``centre``, ``left``, ``right``), as an operator holds them there to
+``register`` it: registration rehearsed end to end. It refuses to start when another console already serves
+the arm on the domain (it looks for one for 3.5 s first), and warns on ``/<arm>/warning`` when commands come
+from more than one node. Needs the ``ros`` extra. Ctrl-C stops it.
 """
 
 from __future__ import annotations
@@ -28,16 +32,20 @@ import threading
 
 import numpy as np
 
+from hardware_if.endoscope_stream import DEFAULT_RIG, EndoscopeStream, camera_topics
 from hardware_if.executor import make_executor
 from hardware_if.network import apply_local_ros_env, environment_domain_id
 from hardware_if.session import require_ros, ros_session
-from hardware_if.sim_task import TaskArm, TaskTopics, TruthLog
+from hardware_if.sim_task import PLACEABLE_SITES, TaskArm, TaskTopics, TruthLog
 from hardware_if.task_estimate import format_point
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
+from sim.force_sensing import SENSING_NAMES, ForceSensor, sensing_params
 from sim.scene3d import PsmScene
 from sim.scene_stream import LiveScene, SceneStream
+from tissue_retract.cli._camera import add_texture_argument, check_texture
+from tissue_retract.cli._checks import float_in
 from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
@@ -70,6 +78,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--truth", metavar="FILE.jsonl", default=None, help="with --task: write the true task state as JSON lines"
     )
+    parser.add_argument(
+        "--wrench",
+        choices=SENSING_NAMES,
+        default="dvrk",
+        help="what the console makes of the tissue force on measured_js effort and body/ and spatial/measured_cf: "
+        "dvrk (the default: the console's estimate from motor currents, no gravity or friction model), "
+        "dvrk-calibrated (what is left after calibrate-wrench) or ideal (the exact force)",
+    )
+    add_texture_argument(parser)
+    parser.add_argument(
+        "--endoscope",
+        nargs="?",
+        const=DEFAULT_RIG,
+        default=None,
+        metavar="RIG",
+        help=f"with --task: publish the stereo endoscope's images on /RIG/{{left,right}}/image_raw and camera_info "
+        f"(default RIG: {DEFAULT_RIG}, the dVRK video pipeline's)",
+    )
+    parser.add_argument(
+        "--endoscope-rate",
+        type=float_in(1.0, 30.0),
+        default=10.0,
+        metavar="HZ",
+        help="endoscope frames per second, 1-30 (default: 10)",
+    )
+    parser.add_argument(
+        "--place-jaws-on",
+        choices=PLACEABLE_SITES,
+        default=None,
+        metavar="SITE",
+        help=f"with --task: start with the closed jaws on this site (rehearse register): {', '.join(PLACEABLE_SITES)}",
+    )
     add_live_argument(parser)
 
 
@@ -78,8 +118,12 @@ def run(args: argparse.Namespace) -> int:
     # Read by rclpy and Fast DDS when they start, so set before the first import of rclpy.
     apply_local_ros_env(args.domain_id)
 
-    if (args.blind or args.truth) and args.task is None:
-        raise ConfigurationError("--blind/--truth", True, "with --task ID (they are about a task's scene)")
+    if (args.blind or args.truth or args.endoscope or args.texture or args.place_jaws_on) and args.task is None:
+        raise ConfigurationError(
+            "--blind/--truth/--endoscope/--texture/--place-jaws-on",
+            True,
+            "with --task ID (they are about a task's scene)",
+        )
     truth_path = check_output_path(args.truth, "--truth") if args.truth else None
     require_ros()
     # The ros extra, imported after the environment it reads is set.
@@ -87,7 +131,12 @@ def run(args: argparse.Namespace) -> int:
 
     from hardware_if.sim_dvrk import SimulatedPsm
 
-    task = TaskArm(args.task, seed=args.seed, blind=args.blind) if args.task is not None else None
+    texture = check_texture(args.texture) if args.texture is not None else None
+    task = TaskArm(args.task, seed=args.seed, blind=args.blind, texture=texture) if args.task is not None else None
+    if task is not None and args.endoscope is not None:
+        task.endoscope = EndoscopeStream(args.task, texture=texture, rig=args.endoscope, rate_hz=args.endoscope_rate)
+        images = ", ".join(camera_topics(args.endoscope).values())
+        print(f"endoscope: {images} at {args.endoscope_rate:g} Hz (render process {task.endoscope.pid})", flush=True)
     base_frame = np.eye(4)
     base_frame[:3, 3] = args.base_xyz
     home_q = None
@@ -101,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
     with live_view as live, ros_session(signal_handlers=False):
         node: SimulatedPsm | None = None
         truth: TruthLog | None = None
+        topics: TaskTopics | None = None
         # Ctrl-C may come at any point once the start-up line is out (a client waits for it), even
         # before spin() starts: all of it ends the server cleanly.
         try:
@@ -110,8 +160,19 @@ def run(args: argparse.Namespace) -> int:
                 scene = SceneStream(PsmScene(model, f"{args.arm}_base", base_frame), [live], period_s=0.05)
                 print(f"live: ws://127.0.0.1:{live.port} (open it in the Foxglove app)", flush=True)
             node = SimulatedPsm(
-                args.arm, rate_hz=args.rate, arm_model=task, base_frame=base_frame, home_q=home_q, scene=scene
+                args.arm,
+                rate_hz=args.rate,
+                arm_model=task,
+                base_frame=base_frame,
+                home_q=home_q,
+                scene=scene,
+                sensor=ForceSensor(sensing_params(args.wrench), np.random.default_rng(args.seed)),
+                exclusive=True,
             )
+            if task is not None and args.place_jaws_on is not None:
+                node.place_arm(task.jaws_on(args.place_jaws_on), 0.0)
+                point = format_point(task.task_state()["grasp_point"])
+                print(f"jaws closed on the {args.place_jaws_on}: grasp point {point} (m, {args.arm}_base)", flush=True)
             # Made before the start-up line: a Ctrl-C right after it must not land in its constructor.
             executor = make_executor()
             executor.add_node(node)
@@ -123,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
                     print(f"{name}: {format_point(state[name])}", flush=True)
                 node.get_logger().info(f"task {args.task!r} scene (seed {args.seed}), blind: no task topics")
             elif task is not None:
-                TaskTopics(node, task)
+                topics = TaskTopics(node, task)
                 node.get_logger().info(
                     f"task {args.task!r} scene (seed {args.seed}); task topics under /{args.arm}/task/"
                 )
@@ -139,10 +200,14 @@ def run(args: argparse.Namespace) -> int:
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:
+            if topics is not None:
+                topics.close()
             if node is not None:
                 node.destroy_node()
             if truth is not None:
                 truth.close()
             if task is not None:
+                if task.endoscope is not None:
+                    task.endoscope.close()
                 task.close()
     return 0

@@ -18,12 +18,12 @@ force, the whole force-strain curve). ``--list`` prints the presets with their s
 from __future__ import annotations
 
 import argparse
-import json
 
 from psm_control.inputs import check_output_path
 from sim.fem import FEM_POISSON_RATIO
 from sim.material import LATTICE_POISSON_RATIO, PRESETS, preset
 from sim.material_testing import MODELS, lift, picture_frame_shear, uniaxial_tension
+from sim.strict_json import write_strict_json
 from sim.tissue import TissueParams
 from tissue_retract.cli._checks import float_in, int_in
 
@@ -127,6 +127,6 @@ def run(args: argparse.Namespace) -> int:
         }
         if lifts:
             document["lift"] = {model: [list(point) for point in curve] for model, curve in lifts.items()}
-        output.write_text(json.dumps(document, indent=2) + "\n")
+        write_strict_json(output, document)
         print(f"written to {output}")
     return 0

@@ -2,14 +2,15 @@
 
 Every setting of the ``--grid`` runs the same ``--episodes`` seeds through the full chain. The output
 folder gets ``episodes.jsonl`` (resumable), ``settings.html`` and ``settings.md`` (every setting, the Pareto
-front marked), ``pareto.png`` and ``recommended_safety.yaml``: the most successful setting whose largest
-peak force stayed under ``--max-force-n``, loadable with ``--safety-config``.
+front marked), ``pareto.png`` and ``recommended_safety.yaml``: the most successful setting whose force limit
+is at or below ``--max-force-n`` and whose largest observed peak stayed under it, loadable with
+``--safety-config``. The report states the recommendation's 95 % CI of success and its episodes, and warns
+when it is weak.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -21,18 +22,23 @@ from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig
 from sim.envs import gym_id
+from sim.strict_json import write_strict_json
+from sim.success_interval import describe_success
 from sim.sweep import EpisodeStore, cap_jobs, parse_ranges, prepare_output, run_trials
 from sim.sweep.page import Page, percent, percent_interval, quantity, unit_of
 from sim.tuning import (
     SettingResult,
     pareto_front,
     recommend,
+    recommendation_warnings,
+    setting_force_limit_n,
     setting_results,
     tunable_fields,
     tuning_trials,
     write_config,
 )
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, float_in, int_in
+from tissue_retract.cli._sensing import announce
 from tissue_retract.cli.robustness import add_sweep_arguments, safety_overrides, sweep_identity
 from tissue_retract.workers import TUNING_WORKER, check_sweep_policy
 
@@ -58,21 +64,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-force-n",
         type=float_in(0.0, 50.0, open_low=True),
         default=None,
-        help="peak-force bound for the recommendation [N] (default: the default force limit)",
+        help="force bound for the recommendation [N]: only settings whose force limit is at or below it, and "
+        "whose largest observed peak stayed under it, are recommended (default: the default force limit)",
     )
 
 
 def _plot(
-    results: list[SettingResult], front: list[SettingResult], chosen: SettingResult | None, bound: float, path: Path
+    results: list[SettingResult],
+    front: list[SettingResult],
+    chosen: SettingResult | None,
+    bound: float,
+    limits_n: list[float],
+    path: Path,
 ) -> None:
     figure = Figure(figsize=(5.5, 3.8), dpi=110)
     axis = figure.subplots()
-    axis.scatter(
-        [r.max_peak_force_n for r in results],
-        [100 * r.success_rate for r in results],
-        color="tab:gray",
-        label="settings",
-    )
+    for above, style in ((False, {"color": "tab:gray", "marker": "o"}), (True, {"color": "tab:red", "marker": "x"})):
+        shown = [r for r, limit in zip(results, limits_n, strict=True) if (limit > bound + 1e-9) is above]
+        axis.scatter(
+            [r.max_peak_force_n for r in shown],
+            [100 * r.success_rate for r in shown],
+            label="force limit above the bound (not recommended)" if above else "settings",
+            **style,  # type: ignore[arg-type]
+        )
     axis.plot(
         [r.max_peak_force_n for r in front],
         [100 * r.success_rate for r in front],
@@ -90,7 +104,7 @@ def _plot(
             linewidths=2,
             label="recommended",
         )
-    axis.axvline(bound, color="red", linestyle="--", label=f"bound {bound:g} N")
+    axis.axvline(bound, color="red", linestyle="--", label=f"bound {bound:g} N (on the limit and the peaks)")
     axis.set_xlabel("largest peak retraction force over the episodes [N]")
     axis.set_ylabel("success [%]")
     axis.set_ylim(-5, 105)
@@ -98,6 +112,17 @@ def _plot(
     axis.legend(fontsize=8)
     figure.tight_layout()
     figure.savefig(path)
+
+
+def _nothing_recommended(results: list[SettingResult], bound: float, base: dict[str, object]) -> str:
+    """Why no setting qualified, with the numbers."""
+    limits = [setting_force_limit_n(r.setting, base) for r in results]
+    if all(limit > bound + 1e-9 for limit in limits):
+        return (
+            f"every setting's force limit ({min(limits):g}-{max(limits):g} N) is above the bound {bound:g} N; "
+            "sweep force_limit_n at or below it"
+        )
+    return f"no setting with a force limit <= {bound:g} N kept its largest observed peak force under {bound:g} N"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -118,7 +143,11 @@ def run(args: argparse.Namespace) -> int:
     )
     trials = tuning_trials(ranges, args.levels, args.episodes, seed=args.seed)
     out = args.out or Path("runs") / f"tune-safety-{task_id}"
-    check_sweep_policy(args.policy, task_id, base, allow_other_task=args.allow_other_task)
+    announce(
+        check_sweep_policy(
+            args.policy, task_id, base, allow_other_task=args.allow_other_task, force_sensing=args.force_sensing
+        )
+    )
     check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
     identity = sweep_identity(
         args,
@@ -127,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
         levels=args.levels,
         episodes=args.episodes,
         safety_config=base,
+        force_sensing=args.force_sensing,
     )
     prepare_output(out, identity, fresh=args.fresh)
     records = run_trials(
@@ -141,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
             "task": task_id,
             "base_config": base,
             "allow_other_task": args.allow_other_task,
+            "force_sensing": args.force_sensing,
         },
     )
     failed = [r for r in records if "error" in r]
@@ -153,20 +184,23 @@ def run(args: argparse.Namespace) -> int:
         return 1
     results = setting_results(records, args.episodes)
     front = pareto_front(results)
-    chosen = recommend(results, bound)
+    chosen = recommend(results, bound, base)
     names = [r.name for r in ranges]
     page = Page(f"Safety tuning of {args.policy} on {task_id}")
     table = Table(title=f"tune-safety: {args.policy} on {task_id} (bound {bound:g} N)")
-    for column in [*names, "success %", "max peak N", "Pareto"]:
+    for column in [*names, "force limit [N]", "success [%]", "95 % CI [%]", "max peak [N]", "Pareto"]:
         table.add_column(column, justify="right")
     rows = []
     for r in results:
         low, high = r.ci95
+        limit_n = setting_force_limit_n(r.setting, base)
         mark = ("front" if r in front else "") + (" recommended" if r is chosen else "")
+        mark += " limit above bound" if limit_n > bound + 1e-9 else ""
         values = [quantity(r.setting[n], unit_of(n)) for n in names]
         rows.append(
             [
                 *values,
+                quantity(limit_n, "N"),
                 percent(r.success_rate),
                 percent_interval(low, high),
                 quantity(r.max_peak_force_n, "N"),
@@ -175,49 +209,89 @@ def run(args: argparse.Namespace) -> int:
                 mark.strip(),
             ]
         )
-        table.add_row(*values, f"{100 * r.success_rate:.0f}", f"{r.max_peak_force_n:.3f}", mark)
-    _plot(results, front, chosen, bound, out / "pareto.png")
+        table.add_row(
+            *values,
+            f"{limit_n:g}",
+            f"{100 * r.success_rate:.0f}",
+            f"{100 * low:.0f}-{100 * high:.0f}",
+            f"{r.max_peak_force_n:.3f}",
+            mark.strip(),
+        )
+    _plot(results, front, chosen, bound, [setting_force_limit_n(r.setting, base) for r in results], out / "pareto.png")
     summary: dict[str, object] = {
         "task": task_id,
         "policy": args.policy,
         "grid": args.grid,
         "bound_n": bound,
+        "episodes_per_setting": args.episodes,
         "settings": [
-            dict(r.setting, success_rate=r.success_rate, max_peak_force_n=r.max_peak_force_n) for r in results
+            dict(
+                r.setting,
+                force_limit_in_force_n=setting_force_limit_n(r.setting, base),
+                success_rate=r.success_rate,
+                success_ci95=list(r.ci95),
+                max_peak_force_n=r.max_peak_force_n,
+            )
+            for r in results
         ],
     }
+    alert = ["verdict"]
+    warnings: list[str] = []
     if chosen is not None:
+        low, high = chosen.ci95
+        limit_n = setting_force_limit_n(chosen.setting, base)
+        confidence = f"success {describe_success(chosen.successes, chosen.episodes)}"
+        why = (
+            f"force limit {limit_n:g} N <= bound {bound:g} N (the limit is what the filter enforces in every "
+            f"episode); the most successful such setting, its largest observed peak {chosen.max_peak_force_n:.3f} N"
+        )
+        warnings = recommendation_warnings(chosen)
         note = (
-            f"Recommended by tissue-retract tune-safety for {args.policy} on {task_id}: success "
-            f"{100 * chosen.success_rate:.0f} % over {chosen.episodes} episodes, largest peak force "
-            f"{chosen.max_peak_force_n:.3f} N <= {bound:g} N."
+            f"Recommended by tissue-retract tune-safety for {args.policy} on {task_id}: {confidence}; {why}."
+            + "".join(f"\nWEAK: {w}." for w in warnings)
         )
         write_config(out / "recommended_safety.yaml", chosen.setting, base, note)
         setting = ", ".join(f"{n} = {quantity(chosen.setting[n], unit_of(n))}" for n in names)
-        verdict = f"Recommended: {setting} (written to recommended_safety.yaml)"
+        verdict = f"Recommended: {setting} (written to recommended_safety.yaml); {confidence}"
         summary["recommended"] = chosen.setting
+        summary["recommendation"] = {
+            "setting": chosen.setting,
+            "force_limit_n": limit_n,
+            "episodes": chosen.episodes,
+            "successes": chosen.successes,
+            "success_ci95": [low, high],
+            "max_peak_force_n": chosen.max_peak_force_n,
+            "warnings": warnings,
+        }
+        alert = ["warnings"] if warnings else []
     else:
-        verdict = f"No setting kept the largest peak force under {bound:g} N; nothing recommended."
-    page.card(
-        [
-            ("policy", args.policy),
-            ("task", task_id),
-            ("grid", f"{args.grid} ({args.levels} levels, {len(results)} settings)"),
-            ("episodes per setting", f"{args.episodes}, seed {args.seed}"),
-            ("peak-force bound", quantity(bound, "N")),
-            ("verdict", verdict),
-            ("package", f"tissue-retract {__version__}"),
-        ],
-        alert=[] if chosen is not None else ["verdict"],
-    )
+        why = _nothing_recommended(results, bound, base)
+        verdict = f"Nothing recommended: {why}"
+    card = [
+        ("policy", args.policy),
+        ("task", task_id),
+        ("asked", f"grid {args.grid} ({args.levels} levels, {len(results)} settings), force bound {bound:g} N"),
+        ("episodes per setting", f"{args.episodes}, seed {args.seed}"),
+        ("verdict", verdict),
+        ("why", why),
+        ("warnings", "; ".join(warnings) if warnings else "none"),
+        ("package", f"tissue-retract {__version__}"),
+    ]
+    page.card(card, alert=alert)
     page.heading("Command")
     page.command(args.command_line)
     page.heading("Settings (every setting ran the same episode seeds)")
-    page.table([*names, "success", "95 % CI", "max peak force", "mean peak force", "interventions", "Pareto"], rows)
+    page.table(
+        [*names, "force limit", "success", "95 % CI", "max peak force", "mean peak force", "interventions", "Pareto"],
+        rows,
+    )
     page.figure(out / "pareto.png", "success against the largest peak force; the Pareto front in blue")
     page.write(out, stem="settings")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    write_strict_json(out / "summary.json", summary, sort_keys=True)
     console = Console(width=110)
     console.print(table)
     console.print(verdict)
+    console.print(f"Why: {why}")
+    for warning in warnings:
+        console.print(f"[bold yellow]WARNING:[/] weak recommendation: {warning}")
     return 0 if chosen is not None else 1

@@ -1,0 +1,166 @@
+"""What the force limit may take as the tissue force, with a sensor that is off by a known bound.
+
+A dVRK PSM has no force sensor: its ``measured_cf`` is the motor currents through ``pinv(J^T)``, off by
+newtons in free space (:mod:`sim.force_sensing` models it). The force limit keeps the *true* force
+below its limit from two upper bounds, tick by tick, and uses the one that leaves more room:
+
+* **measured**: the true force is within ``force_sensing_error_n`` of the measured one, so the filter keeps
+  the measured force that far below the limit (the rows' margin). Usable when the error bound is below
+  the limit; with an exact sensor (error 0) this is the filter as it always was.
+* **travel**: from the moment the jaws closed, the held tissue cannot pull back harder than
+  ``held_load_bound_n`` (its load at the grasp) plus ``tissue_stiffness_bound_n_per_m`` times the grasp
+  point's travel since. The filter then limits that travel, as if the force were the bound's: no force
+  measurement is used at all. The stiffness bound comes from the tissue's physical parameters
+  (:func:`sim.force_sensing.tissue_bounds`: 3 x E t at the stiffest E and thickness of the range).
+
+With an inexact sensor the tissue-stiffness estimate (:class:`safety.stiffness.StiffnessEstimator`) is not
+used: its force increments would carry the sensing's pose- and motion-dependent error as stiffness. Both
+bounds predict with the stiffness bound instead.
+
+A limit below what the sensing resolves (error bound at or above the limit) is kept by the travel bound
+alone, which stops a retraction after ``(limit - held load) / stiffness bound`` of travel:
+:func:`sensing_warning` says so, with the numbers, at the start of every run.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from safety.config import SafetyConfig
+from safety.limits.retraction_force import CLOSED_JAW_RAD
+
+__all__ = ["ForceBound", "ForceEstimate", "sensing_warning"]
+
+#: How long an opened jaw may still hold tissue [s]: two policy steps at the tasks' 10 Hz.
+RELEASE_S = 0.2
+#: How long released tissue takes to settle back [s]: a grasp sooner counts the earlier grasp's travel.
+RESETTLE_S = 1.0
+#: Sources of a tick's force estimate.
+MEASURED = "measured"
+TRAVEL = "travel"
+
+
+class ForceEstimate(NamedTuple):
+    """The force the filter takes for one tick.
+
+    Attributes:
+        force_n: The force the tool applies to the tissue (3,) [N], base axes.
+        margin_n: How far the true force may exceed it [N]: the filter keeps this much below the limit.
+        stiffness_n_per_m: The stiffness to predict a step's force with [N/m].
+        source: ``measured`` or ``travel`` (see the module notes).
+    """
+
+    force_n: np.ndarray
+    margin_n: float
+    stiffness_n_per_m: float
+    source: str
+
+
+class ForceBound:
+    """Chooses, tick by tick, the bound on the true force that leaves the most room (see the module notes).
+
+    The travel is counted from where the jaws closed, and the jaws may hold tissue from then until they
+    have been open for :data:`RELEASE_S` (the simulation lets go at the end of the policy step in which
+    the jaw opened; a real jaw while it opens). A grasp within :data:`RESETTLE_S` of a release counts its
+    travel from the earlier grasp: the tissue it closes on may still be stretched by the earlier pull
+    (measured in ``bench safety``: a policy that let go at 1.5 N and closed again 0.1 s later held 0.5 N
+    at the new grasp, more than the held-load bound).
+
+    Args:
+        limit_n: The force limit [N].
+        error_n: The force sensing's error bound [N] (0: exact).
+        stiffness_bound_n_per_m: The tissue stiffness bound [N/m].
+        held_load_bound_n: The held load at the grasp [N].
+        period_s: The control period [s].
+    """
+
+    def __init__(
+        self,
+        limit_n: float,
+        error_n: float,
+        stiffness_bound_n_per_m: float,
+        held_load_bound_n: float,
+        period_s: float,
+    ) -> None:
+        self.limit_n = float(limit_n)
+        self.error_n = float(error_n)
+        self.stiffness_bound_n_per_m = float(stiffness_bound_n_per_m)
+        self.held_load_bound_n = float(held_load_bound_n)
+        self.period_s = float(period_s)
+        self.reset()
+
+    @classmethod
+    def from_config(cls, config: SafetyConfig) -> ForceBound:
+        """The bound a safety configuration asks for."""
+        return cls(
+            config.effective_force_limit_n,
+            config.force_sensing_error_n,
+            config.tissue_stiffness_bound_n_per_m,
+            config.held_load_bound_n,
+            config.control_period_s,
+        )
+
+    @property
+    def exact(self) -> bool:
+        """The sensor is exact: the filter takes the measured force and the learned stiffness, as always."""
+        return self.error_n == 0.0
+
+    def reset(self) -> None:
+        """A new episode: no grasp yet."""
+        self._grasped_at: np.ndarray | None = None
+        self._open_s = math.inf  # how long the jaws have been open
+
+    def update(
+        self, jaw_rad: float, grasp_point_m: np.ndarray, measured_force_n: np.ndarray, learned_stiffness_n_per_m: float
+    ) -> ForceEstimate:
+        """The tick's estimate from the jaw, the grasp point (base frame) [m] and the measured force [N]."""
+        if self.exact:
+            return ForceEstimate(measured_force_n, 0.0, learned_stiffness_n_per_m, MEASURED)
+        if jaw_rad < CLOSED_JAW_RAD:
+            if self._grasped_at is None or self._open_s >= RESETTLE_S:
+                self._grasped_at = np.array(grasp_point_m, dtype=float)
+            self._open_s = 0.0
+        else:
+            self._open_s += self.period_s
+        stiffness = self.stiffness_bound_n_per_m
+        measured = ForceEstimate(measured_force_n, self.error_n, stiffness, MEASURED)
+        if self._grasped_at is None or self._open_s >= RELEASE_S:
+            return measured
+        travel = stiffness * (np.asarray(grasp_point_m, dtype=float) - self._grasped_at)
+        measured_room = self.limit_n - self.error_n - math.sqrt(float(measured_force_n @ measured_force_n))
+        travel_room = self.limit_n - self.held_load_bound_n - math.sqrt(float(travel @ travel))
+        if measured_room >= travel_room:  # NaN in the measurement fails this: the travel bound needs none
+            return measured
+        return ForceEstimate(travel, self.held_load_bound_n, stiffness, TRAVEL)
+
+    @property
+    def holding(self) -> bool:
+        """The jaws may hold tissue by the jaw alone: closed, or opened less than :data:`RELEASE_S` ago."""
+        return not self.exact and self._grasped_at is not None and self._open_s < RELEASE_S
+
+    def travel_allowed_m(self) -> float:
+        """How far the grasp point may travel from the grasp under the travel bound alone [m]."""
+        return max(0.0, self.limit_n - self.held_load_bound_n) / self.stiffness_bound_n_per_m
+
+
+def sensing_warning(config: SafetyConfig, sensing: str) -> str:
+    """The run's warning when its force limit is below what the sensing resolves ('' when it is not).
+
+    Args:
+        config: The run's safety configuration.
+        sensing: What the force comes from, for the message (``dvrk``, a calibration file, ...).
+    """
+    bound = ForceBound.from_config(config)
+    if bound.exact or bound.error_n < bound.limit_n:
+        return ""
+    return (
+        f"WARNING: force limit {bound.limit_n:g} N is below the force sensing's error bound "
+        f"{bound.error_n:.2f} N ({sensing}): the measured force cannot tell the limit. The limit is kept "
+        f"from the grasp point's travel since the grasp instead, assuming the held tissue is no stiffer than "
+        f"{bound.stiffness_bound_n_per_m:g} N/m and loads the jaws by at most {bound.held_load_bound_n:.2f} N "
+        f"when grasped: a retraction stops after {1000 * bound.travel_allowed_m():.1f} mm of travel. "
+        "Calibrate the force sensing (tissue-retract calibrate-wrench) or raise the limit if the tissue allows it"
+    )

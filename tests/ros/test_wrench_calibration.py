@@ -1,0 +1,82 @@
+"""The dVRK's force sensing over loopback: sim-dvrk's measured_cf and a calibration fitted against it."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from ros_process import start_sim_dvrk, stop, wait_until
+
+from hardware_if.psm_client import PsmClient
+from hardware_if.wrench_calibration import read_calibration
+
+
+@pytest.fixture
+def homed_sim(ros_env: dict[str, str]) -> Iterator[subprocess.Popen[str]]:
+    """A sim-dvrk with its default force sensing (the console's estimate), enabled and homed."""
+    process = start_sim_dvrk(ros_env)
+    rclpy.init()
+    try:
+        with PsmClient("PSM1", node_name="test_force_sensing_homer", deadman_timeout_s=0.5) as client:
+            client.wait_for_measurement(timeout_s=60.0)
+            client.enable(timeout_s=30.0)
+            client.home(timeout_s=30.0)
+            measured = client.measure()
+            assert np.all(np.isfinite(measured.force_n)) and np.linalg.norm(measured.force_n) > 0.05, measured
+    finally:
+        rclpy.shutdown()
+    yield process
+    output = stop(process)
+    assert process.returncode == 0, output
+
+
+def test_calibrate_wrench_lowers_the_held_out_error_three_times(
+    homed_sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    """calibrate-wrench against sim-dvrk: the held-out free-space RMS error falls at least 3x, and the file reads."""
+    out = tmp_path / "wrench.json"
+    command = [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--domain-id", ros_env["ROS_DOMAIN_ID"]]
+    result = subprocess.run(
+        [*command, "--out", str(out), "--duration", "8", "--wait", "60"],
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    match = re.search(r"before RMS ([\d.]+) N, max [\d.]+ N; after RMS ([\d.]+) N", result.stdout)
+    assert match is not None, result.stdout
+    before, after = float(match.group(1)), float(match.group(2))
+    assert before >= 3.0 * after, result.stdout
+    calibration = read_calibration(out)
+    assert calibration.rms_before_n == pytest.approx(before, abs=1e-3)
+    assert 0.0 < calibration.error_bound_n < before
+
+
+def test_calibrate_wrench_needs_an_enabled_arm(ros_env: dict[str, str], tmp_path: Path) -> None:
+    """A disabled console: calibrate-wrench commands nothing, says what to do, exits 1, writes no file."""
+    process = start_sim_dvrk(ros_env)
+    try:
+        command = [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--domain-id", ros_env["ROS_DOMAIN_ID"]]
+        result = subprocess.run(
+            [*command, "--out", str(tmp_path / "w.json"), "--wait", "20"],
+            env=ros_env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
+    finally:
+        stop(process)
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "enable and home the arm first" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "w.json").exists()
+    assert wait_until(lambda: process.poll() is not None, timeout_s=10.0)

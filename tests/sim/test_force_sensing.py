@@ -1,0 +1,119 @@
+"""The model of what a dVRK senses of the tissue force (sim.force_sensing) and its calibration."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hardware_if.wrench_calibration import fit_calibration
+from psm_control.errors import UnknownVariantError
+from psm_control.robot import PsmModel
+from sim.force_sensing import (
+    SENSING_NAMES,
+    ForceSensor,
+    console_force,
+    error_bound_n,
+    sensing_params,
+    tissue_bounds,
+)
+from sim.randomization import DEFAULT_RANGES
+
+
+def _poses(rng: np.random.Generator, count: int) -> list[np.ndarray]:
+    model = PsmModel()
+    poses = []
+    for _ in range(count):
+        q = model.home() + rng.uniform(-0.4, 0.4, 6)
+        q[2] = rng.uniform(0.06, 0.18)
+        poses.append(q)
+    return poses
+
+
+def test_ideal_reports_the_exact_force() -> None:
+    """The ideal preset: the measured force is the tissue force, whatever the pose and motion."""
+    configuration = PsmModel().configuration()
+    sensor = ForceSensor(sensing_params("ideal"))
+    rng = np.random.default_rng(1)
+    for q in _poses(rng, 20):
+        configuration.update(q)
+        force = rng.normal(0.0, 1.0, 3)
+        assert np.array_equal(sensor.measure(configuration, rng.normal(0, 1, 6), force, 0.01), force)
+
+
+def test_the_console_inverts_the_tissue_load_exactly() -> None:
+    """pinv(J^T) J^T f = f: the console's estimate carries the tissue force and adds only what it does not model."""
+    configuration = PsmModel().configuration()
+    rng = np.random.default_rng(2)
+    for q in _poses(rng, 20):
+        configuration.update(q)
+        force = rng.normal(0.0, 1.0, 3)
+        jacobian = configuration.base_jacobian()
+        assert np.allclose(console_force(jacobian, jacobian[:3].T @ force), force, atol=1e-9)
+
+
+def test_dvrk_free_space_force_is_off_by_a_pose_dependent_error_within_its_bound() -> None:
+    """dvrk in free space: never zero, changes with pose, within error_bound_n; calibrated smaller, ideal zero."""
+    configuration = PsmModel().configuration()
+    bound = error_bound_n(sensing_params("dvrk"))
+    sensor = ForceSensor(sensing_params("dvrk"), np.random.default_rng(3))
+    rng = np.random.default_rng(4)
+    readings = []
+    for q in _poses(rng, 200):
+        configuration.update(q)
+        readings.append(sensor.measure(configuration, rng.uniform(-0.5, 0.5, 6), np.zeros(3), 0.01))
+    magnitudes = np.linalg.norm(readings, axis=1)
+    assert magnitudes.min() > 0.05 and magnitudes.max() <= bound
+    assert np.ptp(np.asarray(readings), axis=0).max() > 0.5  # moves with the pose by a large fraction of a newton
+    assert 0.0 < error_bound_n(sensing_params("dvrk-calibrated")) < bound / 3
+    assert error_bound_n(sensing_params("ideal")) == 0.0
+
+
+def test_sensing_scale_scales_every_error_term() -> None:
+    """force_sensing_scale 0 makes the dvrk model exact; 2 doubles its deterministic error."""
+    configuration = PsmModel().configuration()
+    configuration.update(np.array([0.2, -0.1, 0.1, 0.1, 0.2, 0.0]))
+    params = sensing_params("dvrk")
+    zero = ForceSensor(params.scaled(0.0))
+    assert zero.params.exact and np.allclose(zero.measure(configuration, np.zeros(6), np.ones(3), 0.01), np.ones(3))
+    quiet = params.scaled(1.0)
+    assert quiet is params
+
+
+def test_unknown_sensing_is_named() -> None:
+    """An unknown preset lists the known ones."""
+    with pytest.raises(UnknownVariantError, match="dvrk-calibrated"):
+        sensing_params("perfect")
+    assert SENSING_NAMES == ("ideal", "dvrk", "dvrk-calibrated")
+
+
+def test_tissue_bounds_follow_the_ranges() -> None:
+    """The stiffness bound is 1.5 E t at the stiffest range end; three times E, three times the bound."""
+    stiffness, load = tissue_bounds(DEFAULT_RANGES)
+    assert stiffness == pytest.approx(3.0 * 14e3 * 3e-3)
+    assert 0.2 < load < 0.4
+    stiffer = dict(DEFAULT_RANGES, tissue_youngs_modulus_kpa=(18.0, 42.0))
+    assert tissue_bounds(stiffer)[0] == pytest.approx(3 * stiffness)
+
+
+def test_calibration_fit_removes_gravity_and_friction() -> None:
+    """Fitted on one free-space trajectory of the dvrk model, the held-out RMS error falls at least 3x."""
+    configuration = PsmModel().configuration()
+    sensor = ForceSensor(sensing_params("dvrk"), np.random.default_rng(5))
+
+    def trajectory(frequencies: np.ndarray, phase: float) -> list[tuple[np.ndarray, float, np.ndarray, np.ndarray]]:
+        samples = []
+        for k in range(1500):
+            t = k * 0.01
+            q = np.array([0.3, 0.3, 0.03, 0.4, 0.3, 0.3]) * np.sin(frequencies * t + phase)
+            q[2] += 0.12
+            qd = np.array([0.3, 0.3, 0.03, 0.4, 0.3, 0.3]) * frequencies * np.cos(frequencies * t + phase)
+            configuration.update(q)
+            efforts = sensor.efforts(configuration, qd, np.zeros(3), 0.01)
+            samples.append((configuration.base_jacobian(), configuration.insertion_m, qd, efforts))
+        return samples
+
+    fit = trajectory(np.array([1.9, 2.9, 1.4, 1.2, 2.3, 3.1]), 0.0)
+    held_out = trajectory(np.array([2.6, 1.8, 2.3, 1.7, 1.5, 2.2]), 1.0)
+    calibration = fit_calibration("PSM1", fit, held_out)
+    assert calibration.rms_before_n >= 3.0 * calibration.rms_after_n, calibration
+    assert calibration.error_bound_n >= calibration.max_after_n

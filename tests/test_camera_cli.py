@@ -1,0 +1,67 @@
+"""The camera's commands as a user runs them: train-perception, --perception camera and --texture."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import run_cli
+
+TEXTURES = Path(__file__).resolve().parent / "data" / "textures"
+
+
+def test_train_perception_writes_its_model_report_and_picture(tmp_path: Path) -> None:
+    """A short budget prints the held-out error and the floor, and writes the model, report.json and frames.png."""
+    done = run_cli("train-perception", "--budget-s", "25", "--heldout", "10", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    assert "held-out site error (10 frames x 3 sites): median" in done.stdout
+    assert "floor of the sites' offset (not visible on an unmarked flap)" in done.stdout
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["report"]["heldout_frames"] == 10 and report["mark_sites"] is False
+    assert (tmp_path / "site-estimator.safetensors").stat().st_size > 0
+    assert (tmp_path / "frames.png").stat().st_size > 1000
+
+
+def test_evaluate_with_the_camera_on_an_unseen_texture_reports_the_site_error(tmp_path: Path) -> None:
+    """evaluate --perception camera --texture FILE: the summary carries site_error_mm and the texture."""
+    out = tmp_path / "camera.json"
+    texture = str(TEXTURES / "stripes-green.png")
+    done = run_cli(
+        "evaluate", "--policy", "pretrained", "--task", "lift", "--episodes", "2", "--seeds", "0",
+        "--perception", "camera", "--texture", texture, "--json", str(out),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(out.read_text())["summary"]
+    assert summary["perception"] == "camera" and summary["texture"].endswith("stripes-green.png")
+    assert set(summary["site_error_mm"]) == {"median", "p95", "max"}
+    assert all(e["site_error_mm"] is not None for e in json.loads(out.read_text())["episodes"])
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["--texture", "/etc/hostname"], "--texture"),
+        (["--texture", "/dev/zero"], "--texture"),
+        (["--perception", "lidar"], "camera or camera:MODEL"),
+        (["--perception", "camera:/etc/hostname"], "not a safetensors site estimator"),
+        (["--perception", "camera", "--blind"], "either --blind or --perception"),
+        (["--perception", "camera", "--task", "expose"], "a task whose goal is a place"),
+    ],
+)
+def test_bad_camera_options_are_refused_in_one_line(arguments: list[str], message: str) -> None:
+    """Bad textures, perception values and combinations exit 1 with one line naming the option, no traceback."""
+    done = run_cli("evaluate", "--policy", "pretrained", "--task", "lift", "--episodes", "1", *arguments)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert message in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+def test_deploy_to_the_simulation_with_the_camera_prints_how_far_off_the_site_was_seen(tmp_path: Path) -> None:
+    """deploy --target sim --perception camera runs an episode and says how far from the true site it saw it."""
+    done = run_cli(
+        "deploy", "--policy", "pretrained", "--target", "sim", "--task", "lift", "--perception", "camera",
+        "--record", str(tmp_path / "run.mcap"), "--policy-budget", "600",  # a loaded machine: no overrun hold
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "site seen" in done.stdout and "mm off" in done.stdout, done.stdout

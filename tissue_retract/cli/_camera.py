@@ -1,0 +1,72 @@
+"""The options that put the endoscope in a command: ``--texture FILE.png`` and ``--perception camera[:MODEL]``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from psm_control.errors import ConfigurationError, InputFileError
+from psm_control.inputs import check_regular_file
+from sim.tissue import TissueParams
+
+__all__ = ["add_perception_argument", "add_texture_argument", "check_texture", "load_perception", "tissue_params"]
+
+_MAX_TEXTURE_BYTES = 32 * 1024 * 1024
+_MAX_TEXTURE_PX = 8192
+
+
+def check_texture(path: str) -> str:
+    """A readable PNG or JPEG image file of at most 8192 px a side, or a :class:`ConfigurationError`."""
+    check_regular_file(path, "--texture", _MAX_TEXTURE_BYTES)
+    from PIL import Image, UnidentifiedImageError  # Pillow comes with matplotlib and imageio
+
+    allowed = f"a PNG or JPEG image of at most {_MAX_TEXTURE_PX} px a side"
+    try:
+        with Image.open(path) as picture:
+            if picture.format not in ("PNG", "JPEG"):
+                raise InputFileError("--texture", path, f"{allowed} (this is {picture.format})")
+            if max(picture.size) > _MAX_TEXTURE_PX or min(picture.size) < 1:
+                raise InputFileError("--texture", path, f"{allowed} (this is {picture.size[0]} x {picture.size[1]})")
+            picture.convert("RGB").load()
+    except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as e:
+        raise InputFileError("--texture", path, f"{allowed} ({e})") from e
+    return str(Path(path).resolve())
+
+
+def add_texture_argument(parser: argparse.ArgumentParser) -> None:
+    """``--texture FILE.png``: the flap's texture from an image file."""
+    parser.add_argument(
+        "--texture",
+        metavar="FILE.png",
+        default=None,
+        help="the flap's texture from an image (PNG or JPEG), e.g. a photo of your phantom, in its own colours",
+    )
+
+
+def add_perception_argument(parser: argparse.ArgumentParser) -> None:
+    """``--perception camera[:MODEL]``: the site from the endoscope's images."""
+    parser.add_argument(
+        "--perception",
+        metavar="camera[:MODEL]",
+        default=None,
+        help="Tasks I-III: the observation's site from the site estimator on the endoscope's stereo images "
+        "(MODEL: a train-perception model file; default: the shipped one), a jaw-sensed grasp",
+    )
+
+
+def load_perception(value: str | None) -> Any:
+    """The :class:`~policies.perception.SiteEstimator` that ``--perception`` names (None without it)."""
+    if value is None:
+        return None
+    kind, _, model = value.partition(":")
+    if kind != "camera":
+        raise ConfigurationError("--perception", value, "camera or camera:MODEL (a train-perception model file)")
+    from policies.perception import load_estimator  # torch: only when the camera is used
+
+    return load_estimator(model or None)
+
+
+def tissue_params(texture: str | None) -> TissueParams:
+    """The flap's settings with the texture file ``--texture`` names (checked)."""
+    return TissueParams(texture_path=check_texture(texture) if texture is not None else None)

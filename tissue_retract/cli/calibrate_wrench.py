@@ -1,0 +1,169 @@
+"""``tissue-retract calibrate-wrench``: fit the dVRK's force-sensing errors in free space, for ``deploy``.
+
+With no tissue in the jaws, the arm is driven through two short excitation trajectories (Lissajous
+motions of the tool tip with a yaw swing, about where it starts, through the whole control chain: IK,
+safety filter, Ruckig, verifier). The first is fitted (:mod:`hardware_if.wrench_calibration`), the second
+held out: the command prints the free-space force error of the console's estimate and of the calibrated
+one on it (RMS and largest, N), and writes the calibration to ``--out`` for
+``deploy --target dvrk --wrench-calibration F.json``. The arm must be ENABLED and homed (``deploy`` or the
+dVRK's own client does that); nothing may touch the instrument meanwhile.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psm_control.commands import CartesianDelta
+from psm_control.inputs import check_output_path
+from psm_control.robot import PsmModel
+from safety.chain import ControlChain
+from safety.config import SafetyConfig
+from tissue_retract.cli._checks import float_in
+from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
+
+__all__ = ["add_arguments", "run"]
+
+#: Each trajectory's tip frequencies along x, y, z and its yaw frequency [Hz]: the fitted and the held-out
+#: ones differ, so the check is on motions the fit did not see.
+_FREQUENCIES_HZ = ((0.31, 0.47, 0.23, 0.19), (0.41, 0.29, 0.37, 0.27))
+_AMPLITUDE_M = np.array([0.02, 0.02, 0.015])
+_YAW_AMPLITUDE_RAD = 0.4
+#: The deadman of the excitation [s]: in free space, with no tissue held, a late measurement costs a sample,
+#: not safety; a loaded machine's console is late by more than the deploy's 50 ms now and then.
+_DEADMAN_S = 0.25
+#: Holds for a late measurement an excitation resumes from before it gives up.
+_MAX_HOLDS = 20
+#: A new target for the chain every this many ticks (the policies' 10 Hz at the dVRK's 100 Hz).
+_TICKS_PER_TARGET = 10
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the subcommand to its parser."""
+    parser.add_argument("--arm", default="PSM1", help="arm name / topic namespace (default: PSM1)")
+    parser.add_argument("--out", metavar="F.json", required=True, help="where to write the calibration")
+    parser.add_argument(
+        "--duration",
+        type=float_in(5.0, 600.0),
+        default=20.0,
+        help="seconds of each of the two trajectories, 5-600 (default: 20)",
+    )
+    parser.add_argument(
+        "--wait", type=float_in(0.0, 3600.0, open_low=True), default=10.0, help="seconds to wait for the arm"
+    )
+    add_console_arguments(parser, network_help="keep your ROS discovery settings instead of localhost-only")
+
+
+def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...], duration_s: float, wait_s: float):
+    """Drive one excitation trajectory; return its samples ``(jacobian, insertion, qd, efforts)``."""
+    local = PsmModel().configuration()
+    measured = client.wait_for_measurement(wait_s)
+    chain.reset(measured)
+    local.update(measured.q)
+    start = local.local_pose()[:3, 3].copy()
+    samples = []
+    rate = chain.config.control_rate_hz
+    ticks = round(duration_s * rate)
+    next_tick = time.monotonic()
+    holds = 0
+    for tick in range(ticks):
+        if tick % _TICKS_PER_TARGET == 0:
+            t, later = tick / rate, (tick + _TICKS_PER_TARGET) / rate
+            wave = np.array([math.sin(2 * math.pi * f * t) for f in frequencies[:3]])
+            yaw = _YAW_AMPLITUDE_RAD * (
+                math.sin(2 * math.pi * frequencies[3] * later) - math.sin(2 * math.pi * frequencies[3] * t)
+            )
+            local.update(measured.q)
+            tip = local.local_pose()[:3, 3]
+            chain.set_target(CartesianDelta(start + _AMPLITUDE_M * wave - tip, yaw, 0.0, "local"), measured)
+        output = chain.tick(measured)
+        if output.safety_stop:
+            raise RuntimeError(f"the control chain stopped the excitation: {output.reason}")
+        client.servo_jp(output.command)
+        status = client.status
+        if status.holding:  # a late measurement: the arm held; resume from where it is, without the sample
+            holds += 1
+            if holds > _MAX_HOLDS:
+                raise RuntimeError(f"the arm held {holds} times, last: {status.reason}")
+            measured = client.next_measurement(measured.stamp_s, wait_s)
+            client.resume()
+            chain.reset(measured)
+            next_tick = time.monotonic()
+            continue
+        # Paced by the clock, as deploy is: the chain's deadman compares its own clock with the arm's.
+        next_tick += 1.0 / rate
+        delay = next_tick - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        else:
+            next_tick = time.monotonic()
+        measured = client.measure()
+        local.update(measured.q)
+        samples.append((local.base_jacobian(), local.insertion_m, np.asarray(measured.qd), client.efforts()))
+    return samples
+
+
+def _to_start(client: Any, wait_s: float) -> None:
+    """Move to the excitation's start (the tool 12 cm in, the wrist straight) with the console's move_jp.
+
+    A homed PSM rests with the tool at the RCM, where the chain refuses to work (the dVRK's 45 mm minimum).
+    """
+    start = PsmModel().home()
+    client.move_jp(start)
+    deadline = time.monotonic() + wait_s
+    while not np.allclose(client.measure().q, start, atol=1e-3):
+        if time.monotonic() > deadline:
+            raise RuntimeError(
+                f"the arm did not reach the excitation's start {start.round(3).tolist()} in {wait_s:g} s"
+            )
+        client.next_measurement(client.measure().stamp_s, wait_s)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Calibrate, print the held-out errors, write the file; 0, or 1 with the reason."""
+    output = check_output_path(args.out, "--out")
+    apply_console_arguments(args)
+    # The ros extra, imported after the environment it reads is set.
+    from hardware_if.errors import DvrkError
+    from hardware_if.psm_client import PsmClient
+    from hardware_if.session import ros_session
+    from hardware_if.wrench_calibration import fit_calibration
+
+    config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)
+    chain = ControlChain(config)
+    node = f"{args.arm.lower()}_calibrate_wrench"
+    with ros_session(), PsmClient(args.arm, node_name=node, deadman_timeout_s=_DEADMAN_S) as client:
+        try:
+            client.wait_for_measurement(args.wait)
+            reason = client.wait_ready(args.wait)
+            if reason:
+                print(
+                    f"tissue-retract calibrate-wrench: error: {reason} (enable and home the arm first)", file=sys.stderr
+                )
+                return 1
+            _to_start(client, args.wait)
+            print(f"{args.arm}: free space, no tissue in the jaws: excitation 1 of 2 ({args.duration:g} s)", flush=True)
+            fit = _trajectory(client, chain, _FREQUENCIES_HZ[0], args.duration, args.wait)
+            print(f"{args.arm}: excitation 2 of 2, held out ({args.duration:g} s)", flush=True)
+            held_out = _trajectory(client, chain, _FREQUENCIES_HZ[1], args.duration, args.wait)
+        except (DvrkError, RuntimeError) as e:
+            print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
+            return 1
+    calibration = fit_calibration(args.arm, fit, held_out)
+    print(
+        f"free-space force error on the held-out trajectory ({len(held_out)} samples): "
+        f"before RMS {calibration.rms_before_n:.3f} N, max {calibration.max_before_n:.3f} N; "
+        f"after RMS {calibration.rms_after_n:.3f} N, max {calibration.max_after_n:.3f} N "
+        f"({calibration.rms_before_n / max(calibration.rms_after_n, 1e-12):.1f} x lower RMS)"
+    )
+    print(f"error bound for the safety filter: {calibration.error_bound_n:.3f} N")
+    calibration.write(Path(output))
+    print(f"written to {output}")
+    return 0
