@@ -28,7 +28,7 @@ def test_fault_ends_in_a_recorded_hold(fault: Fault, tmp_path: Path) -> None:
     result = run_fault(fault, tmp_path, domain)
     assert result.status == fault.status, result.output
     assert not result.traceback, result.output
-    assert fault.reason in result.hold, result.output
+    assert fault.explains(result.hold), result.output
     if fault.action == "kill-deploy":
         assert result.truncated and result.episodes_kept == 2, result.recording
         done = subprocess.run(
@@ -41,7 +41,7 @@ def test_fault_ends_in_a_recorded_hold(fault: Fault, tmp_path: Path) -> None:
         assert "truncated recording" in done.stdout and "2 episode(s)" in done.stdout, done.stdout
         assert "episode 0: success=True" in done.stdout and "episode 1: success=True" in done.stdout
     else:
-        assert result.holds_recorded and any(fault.reason in h for h in result.holds_recorded), result.recording
+        assert result.holds_recorded and any(fault.explains(h) for h in result.holds_recorded), result.recording
         if fault.status == 4:
             assert "HOLD:" in result.hold
             if fault.action == "kill-console":

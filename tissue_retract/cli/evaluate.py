@@ -148,25 +148,26 @@ def run(args: argparse.Namespace) -> int:
         started = last_line_s = time.perf_counter()
 
         def episodes() -> None:
+            # Ctrl-C may land anywhere in the loop, the progress line included: one handler for all of it.
             nonlocal failure, interrupted, last_line_s
-            for seed in seeds:
-                try:
-                    results.append(run_episode(env, policy, reset, seed))
-                except PolicyError as e:
-                    failure = e
-                    return
-                except KeyboardInterrupt:
-                    interrupted = True
-                    return
-                done, now = len(results), time.perf_counter()
-                if done in (1, len(seeds)) or done % report_every == 0 or now - last_line_s >= PROGRESS_PERIOD_S:
-                    last_line_s = now
-                    successes = sum(r.success for r in results)
-                    print(
-                        f"evaluate: {done}/{len(seeds)} episodes, {successes} successes, {now - started:.1f} s",
-                        file=sys.stderr,
-                        flush=True,
-                    )
+            try:
+                for seed in seeds:
+                    try:
+                        results.append(run_episode(env, policy, reset, seed))
+                    except PolicyError as e:
+                        failure = e
+                        return
+                    done, now = len(results), time.perf_counter()
+                    if done in (1, len(seeds)) or done % report_every == 0 or now - last_line_s >= PROGRESS_PERIOD_S:
+                        last_line_s = now
+                        successes = sum(r.success for r in results)
+                        print(
+                            f"evaluate: {done}/{len(seeds)} episodes, {successes} successes, {now - started:.1f} s",
+                            file=sys.stderr,
+                            flush=True,
+                        )
+            except KeyboardInterrupt:
+                interrupted = True
 
         _, elapsed = timed(episodes)
         controller = env.unwrapped.controller_name
