@@ -122,9 +122,12 @@ class _Stopper:
             yield self  # signals are delivered to the main thread only: nothing to install
             return
         previous = {sig: signal.signal(sig, self._handle) for sig in STOP_SIGNALS}
+        # A deploy started from a thread that blocks them inherits them blocked: they would never arrive.
+        previous_mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
         try:
             yield self
         finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
 

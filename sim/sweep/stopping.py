@@ -1,13 +1,15 @@
 """Stopping a sweep: SIGINT and SIGTERM end it between trials, whatever signal handling it inherited.
 
 A sweep started in the background of a script inherits SIGINT ignored (the shell does that for ``&``
-jobs), and Python's default SIGTERM ends the process at once: the pool's workers and semaphores are then
-left to the resource tracker, which warns of leaked semaphores. :func:`stop_signals` installs handlers of
-the sweep's own for both, which raise :class:`SweepStopped` (a ``KeyboardInterrupt``) in the main thread;
-the executor then keeps the running trials that finish within :data:`STOP_GRACE_S`, ends the pool's
-workers (:func:`stop_pool`) and the command exits with 128 + the signal (130, 143). The pool's workers
-ignore both (:func:`ignore_stop_signals`): a Ctrl-C at a terminal reaches the whole process group, and a
-worker killed mid-trial would lose that trial.
+jobs); one started from a thread that blocks signals (a test runner's, a library's) inherits them
+blocked, and a blocked signal stays pending for ever; Python's default SIGTERM ends the process at once:
+the pool's workers and semaphores are then left to the resource tracker, which warns of leaked
+semaphores. :func:`stop_signals` installs handlers of the sweep's own for both (unblocked), which raise
+:class:`SweepStopped` (a ``KeyboardInterrupt``) in the main thread; the executor then keeps the running
+trials that finish within :data:`STOP_GRACE_S`, ends the pool's workers (:func:`stop_pool`) and the
+command exits with 128 + the signal (130, 143). The pool's workers ignore both
+(:func:`ignore_stop_signals`): a Ctrl-C at a terminal reaches the whole process group, and a worker killed
+mid-trial would lose that trial.
 """
 
 from __future__ import annotations
@@ -45,14 +47,17 @@ def _raise(signum: int, _frame: Any) -> None:
 
 @contextlib.contextmanager
 def stop_signals() -> Iterator[None]:
-    """SIGINT and SIGTERM raise :class:`SweepStopped` in the block; the previous handlers come back after."""
+    """SIGINT and SIGTERM raise :class:`SweepStopped` in the block, unblocked if they came blocked; the
+    previous handlers and mask come back after."""
     if threading.current_thread() is not threading.main_thread():
         yield  # signals are delivered to the main thread only
         return
     previous = {sig: signal.signal(sig, _raise) for sig in STOP_SIGNALS}
+    previous_mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     try:
         yield
     finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
 

@@ -47,8 +47,9 @@ SUBCOMMANDS: dict[str, str] = {
 
 
 #: Commands that run for long and stop on SIGINT or SIGTERM with handlers of their own, whatever the
-#: disposition they inherited (exit 130 or 143; what finished is kept, see :mod:`sim.sweep.stopping`).
-SWEEP_COMMANDS = ("robustness", "tune-safety", "reproduce", "train")
+#: disposition or signal mask they inherited (exit 130 or 143; what finished is kept, see
+#: :mod:`sim.sweep.stopping`).
+STOPPABLE_COMMANDS = ("evaluate", "robustness", "tune-safety", "reproduce", "train")
 
 
 def _exit_now(status: int) -> None:
@@ -132,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     args.command_line = shlex.join(["tissue-retract", *arguments])  # for reports: what exactly ran
     stopping: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
-    if args.command in SWEEP_COMMANDS:
+    if args.command in STOPPABLE_COMMANDS:
         from sim.sweep.stopping import stop_signals  # these commands load the simulation anyway
 
         stopping = stop_signals()
@@ -148,6 +149,6 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as e:
         print(f"tissue-retract {args.command}: interrupted", file=sys.stderr)
         status = 128 + int(getattr(e, "signum", signal.SIGINT))  # 130 for Ctrl-C, 143 for SIGTERM
-        if args.command in SWEEP_COMMANDS:
+        if args.command in STOPPABLE_COMMANDS:
             _exit_now(status)
         return status

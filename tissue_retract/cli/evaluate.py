@@ -5,7 +5,7 @@ observation dict and returning an action) or a checkpoint path (loaded by ``poli
 ``--episodes N`` is the total: episode k runs on seed ``S * 100000 + k // len(seeds)`` with S the
 ``k % len(seeds)``-th of ``--seeds`` (with one seed S, episodes ``S * 100000 + 0 .. N - 1``). Progress goes
 to stderr as episodes finish; Ctrl-C stops after the running episode and still writes ``--json`` with the
-episodes that finished (``"interrupted": true``, exit 130). Every action goes through
+episodes that finished (``"interrupted": true``, exit 130; SIGTERM the same with exit 143). Every action goes through
 the control chain; ``--safety-config FILE`` (TOML/YAML, as ``tissue-retract safety show``) sets its
 limits, for example ``force_limit_n``; ``--no-safety`` is the ablation without the filter.
 
@@ -24,6 +24,7 @@ flap.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 
@@ -56,10 +57,8 @@ from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, int_in
 from tissue_retract.cli._live import add_live_argument
 from tissue_retract.cli._sensing import add_force_sensing_argument, announce
 
-__all__ = ["EXIT_INTERRUPTED", "add_arguments", "episode_seeds", "run"]
+__all__ = ["add_arguments", "episode_seeds", "run"]
 
-#: Exit status of an evaluation stopped with Ctrl-C (128 + SIGINT).
-EXIT_INTERRUPTED = 130
 #: A progress line at least this often while episodes end [s] (and at the first, every 5 % and the last).
 PROGRESS_PERIOD_S = 10.0
 
@@ -140,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"live: ws://127.0.0.1:{live.port} (open it in the Foxglove app)", flush=True)
     results: list[EpisodeResult] = []
     failure: PolicyError | None = None
-    interrupted = False
+    interrupted = 0  # the exit status of a stop signal, 0 when none came
     try:
         policy, reset = resolve_policy(args.policy, env, allow_other_task=args.allow_other_task)
         seeds = episode_seeds(args.seeds, args.episodes)
@@ -166,8 +165,8 @@ def run(args: argparse.Namespace) -> int:
                             file=sys.stderr,
                             flush=True,
                         )
-            except KeyboardInterrupt:
-                interrupted = True
+            except KeyboardInterrupt as e:
+                interrupted = 128 + int(getattr(e, "signum", signal.SIGINT))  # 130 for Ctrl-C, 143 for SIGTERM
 
         _, elapsed = timed(episodes)
         controller = env.unwrapped.controller_name
@@ -186,8 +185,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"tissue-retract evaluate: error: policy error: {failure}{kept}", file=sys.stderr)
         return 1
     if interrupted and not results:
-        print("tissue-retract evaluate: interrupted (Ctrl-C) before the first episode ended", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        print("tissue-retract evaluate: interrupted before the first episode ended", file=sys.stderr)
+        return interrupted
     summary = summarize(results, elapsed)
     summary.update(
         task=sim.envs.gym_id(args.task),
@@ -243,6 +242,6 @@ def run(args: argparse.Namespace) -> int:
         write_strict_json(output, {"summary": summary, "episodes": [r.to_dict() for r in results]})
     if interrupted:
         kept = f"; the {len(results)} finished episodes are in {output}" if output is not None else ""
-        print(f"tissue-retract evaluate: interrupted (Ctrl-C){kept}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        print(f"tissue-retract evaluate: interrupted{kept}", file=sys.stderr)
+        return interrupted
     return 0

@@ -145,8 +145,10 @@ def run(args: argparse.Namespace) -> int:
     live_view = contextlib.nullcontext() if args.live is None else LiveScene(port=args.live)
     # Python's own Ctrl-C handling, not rclpy's: rclpy's shuts the context down from under a timer
     # callback's publish; a KeyboardInterrupt stops between two Python statements instead (installed
-    # explicitly: a process started in the background of a script inherits SIGINT ignored).
+    # explicitly: a process started in the background of a script inherits SIGINT ignored, one started
+    # from a thread that blocks it inherits it blocked).
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     with live_view as live, ros_session(signal_handlers=False):
         node: SimulatedPsm | None = None
         truth: TruthLog | None = None
