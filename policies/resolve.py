@@ -10,7 +10,6 @@ import importlib
 from collections.abc import Callable
 from typing import Any
 
-from policies.checkpoint import load_policy
 from policies.shipped import PRETRAINED, shipped_policy_path
 from psm_control.errors import ConfigurationError
 from sim.evaluation import Policy
@@ -73,5 +72,9 @@ def resolve_policy(spec: str, env: Any, *, allow_other_task: bool = False) -> tu
         if not callable(target):
             raise ConfigurationError("--policy", spec, "a callable taking the observation dict")
         return target, _reset_of(target)
+    # Imported here: torch takes about a second to import, which scripted and module:callable policies
+    # (the fault matrix's, a user's) and every command's input errors need not wait for.
+    from policies.checkpoint import load_policy
+
     policy = load_policy(spec, env, allow_other_task=allow_other_task)
     return policy, _reset_of(policy)
