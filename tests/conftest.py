@@ -34,7 +34,11 @@ def pytest_configure(config: pytest.Config) -> None:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Under pytest-xdist (``--dist loadgroup``), a module's tests that share a module-scoped fixture (a
     ``sim-dvrk`` started once, a deploy run once) go to one worker, so the fixture is built once, not on
-    both. Tests already in a group (the Ray tests) keep theirs."""
+    both. Tests already in a group (the Ray tests) keep theirs.
+
+    Tests marked ``slow`` (and the groups they are in) are handed out first: a minute-long test started
+    last would keep one worker busy after the others have finished.
+    """
     for item in items:
         if item.get_closest_marker("xdist_group") is not None:
             continue
@@ -42,6 +46,14 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         scopes = [d.scope for defs in (definitions.name2fixturedefs.values() if definitions else ()) for d in defs]
         if "module" in scopes:
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+    slow_groups = {_group(item) for item in items if item.get_closest_marker("slow") is not None}
+    items.sort(key=lambda item: _group(item) not in slow_groups)  # stable: the order within stays
+
+
+def _group(item: pytest.Item) -> str:
+    """The xdist group an item is sent with: its marker's, else the test itself."""
+    marker = item.get_closest_marker("xdist_group")
+    return str(marker.args[0]) if marker is not None and marker.args else item.nodeid
 
 
 @pytest.fixture(params=ARMS)

@@ -468,6 +468,7 @@ def test_every_bad_input_case_is_in_a_group(tmp_path: Path) -> None:
     assert [n for n in names if sum(n.startswith(GROUPS[g]) for g in GROUPS) != 1] == []
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(1800)  # a few dozen fresh interpreters: a hang guard that a loaded machine stays within
 @pytest.mark.parametrize("group", GROUPS)
 def test_every_bad_input_gets_a_named_error_and_loses_nothing(tmp_path: Path, group: str) -> None:

@@ -306,9 +306,11 @@ class _Lines:
             self._queue.put(line)
         self._queue.put(None)
 
-    def wait_for(self, text: str, timeout_s: float) -> bool:
-        """Collect lines until one contains ``text`` (True) or the output ends or the guard runs out."""
-        if any(text in line for line in self.lines):
+    def wait_for(self, text: str | tuple[str, ...], timeout_s: float) -> bool:
+        """Collect lines until one contains ``text`` (or one of them: True) or the output ends or the guard
+        runs out."""
+        texts = (text,) if isinstance(text, str) else text
+        if any(t in line for line in self.lines for t in texts):
             return True
         deadline = time.monotonic() + timeout_s
         while (remaining := deadline - time.monotonic()) > 0:
@@ -321,7 +323,7 @@ class _Lines:
                 self._queue.put(None)
                 return False
             self.lines.append(line)
-            if text in line:
+            if any(t in line for t in texts):
                 return True
         return False
 
@@ -407,8 +409,8 @@ class _Injector:
 
         return convert.joint_state(JOINT_NAMES, [3.0, 0.0, 0.1, 0.0, 0.0, 0.0])
 
-    def flood(self, publisher: Any, message: Any, lines: _Lines, text: str, timeout_s: float) -> bool:
-        """Publish ``message`` until the deploy's output shows ``text`` (the client saw it)."""
+    def flood(self, publisher: Any, message: Any, lines: _Lines, text: str | tuple[str, ...], timeout_s: float) -> bool:
+        """Publish ``message`` until the deploy's output shows ``text`` or one of them (the client saw it)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline and not lines.ended:
             if publisher.get_subscription_count() > 0:
@@ -519,7 +521,9 @@ def _run_fault_in(
             injector.flood(publisher, injector.tracking_message(), lines, "holding, tracking error", guard_s)
         elif fault.action == "disable" and injector is not None:
             publisher, message = injector.publisher("state_command")
-            injector.flood(publisher, message, lines, "holding, not ready", guard_s)
+            # The injector both disables and commands the arm: the deploy holds on whichever it sees first.
+            held = tuple(f"holding, {reason}" for reason in (fault.reason, *fault.also))
+            injector.flood(publisher, message, lines, held, guard_s)
         elif fault.action == "kill-console" and console is not None:
             console.kill()
             console.wait()

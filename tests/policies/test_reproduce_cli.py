@@ -56,6 +56,7 @@ def _run_records(out: Path) -> dict[str, dict[str, object]]:
     return records
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("ray")  # one local Ray cluster at a time: these run on one worker
 def test_ray_backend_gives_the_local_pools_records(tmp_path: Path) -> None:
     """reproduce --backend ray (a local cluster on 127.0.0.1) trains the same runs to the same records."""

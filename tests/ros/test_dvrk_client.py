@@ -86,6 +86,7 @@ def test_client_api_against_sim_dvrk(kinematic_sim: int) -> None:
         assert checks.get(name) == "ok", (name, output)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("script", list(SCRIPTS))
 def test_dvrk_script_runs_to_completion_on_a_task_scene(script: str) -> None:
     """The dVRK's own test script runs to completion against ``sim-dvrk --task lift``; no wait() times out."""

@@ -120,6 +120,7 @@ def _deploy(
     )
 
 
+@pytest.mark.slow
 def test_deploy_completes_episodes_from_the_images_alone(
     endoscope_sim: tuple[subprocess.Popen[str], int, np.ndarray], ros_env: dict[str, str], tmp_path: Path
 ) -> None:

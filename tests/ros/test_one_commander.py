@@ -168,6 +168,7 @@ def test_rogue_servo_jp_publisher_holds_naming_it(
     assert "Traceback" not in output
 
 
+@pytest.mark.slow
 def test_arm_moved_between_deploys_goes_back_to_its_start(
     sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path
 ) -> None:

@@ -60,6 +60,7 @@ def test_calibrate_wrench_lowers_the_held_out_error_three_times(
     assert 0.0 < calibration.error_bound_n < before
 
 
+@pytest.mark.slow
 def test_calibrate_wrench_needs_an_enabled_arm(ros_env: dict[str, str], tmp_path: Path) -> None:
     """A disabled console: calibrate-wrench commands nothing, says what to do, exits 1, writes no file."""
     process = start_sim_dvrk(ros_env)

@@ -152,6 +152,7 @@ def test_bench_env_reports_rates(tmp_path: Path) -> None:
     assert numbers["env_steps_per_s"] > 0 and numbers["render_env_steps_per_s"] > 0
 
 
+@pytest.mark.slow
 def test_bench_train_times_the_recipe_and_confirms_on_unseen_episodes(tmp_path: Path) -> None:
     """`bench train`: a recipe run per seed, timed from outside, its kept policy scored on unseen episodes."""
     path = tmp_path / "train.json"

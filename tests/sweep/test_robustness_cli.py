@@ -52,6 +52,7 @@ def test_unknown_parameter_is_refused_with_valid_names(tmp_path: Path) -> None:
     assert not (tmp_path / "episodes.jsonl").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("ray")  # one local Ray cluster at a time: these run on one worker
 def test_simulation_sweep_is_identical_on_local_and_ray(tmp_path: Path) -> None:
     """The same robustness sweep of the real simulation gives identical episode records on both backends."""

@@ -117,6 +117,7 @@ def test_trial_that_always_crashes_is_recorded_not_lost(tmp_path: Path) -> None:
     assert all("RuntimeError: broken trial" in r["error"] for r in records)
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("ray")  # one local Ray cluster at a time: these run on one worker
 def test_local_and_ray_backends_agree(tmp_path: Path) -> None:
     """The same sweep gives identical per-episode results on the local pool and a local Ray cluster."""
