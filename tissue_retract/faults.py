@@ -27,6 +27,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -437,15 +438,25 @@ def _recording_facts(record: Path) -> tuple[str, int, list[str], bool]:
     return text, len(summary.episodes), summary.holds, summary.truncated
 
 
-def run_fault(fault: Fault, workdir: Path, domain_id: int, *, guard_s: float = 300.0) -> FaultResult:
+def run_fault(
+    fault: Fault,
+    workdir: Path,
+    domain_id: int,
+    *,
+    guard_s: float = 300.0,
+    retry_domains: Sequence[int] | None = None,
+) -> FaultResult:
     """Run one fault in ``workdir`` on ROS domain ``domain_id``; return what happened.
 
     ``guard_s`` only bounds a run that went wrong; a correct one ends as soon as its deploy does. When
     another machine user's arm shares the domain (the deploy holds on ``another console``), the fault
-    runs again on another domain, up to twice.
+    runs again on ``retry_domains`` in turn (default: two others, 37 and 74 ids on). A caller that shares
+    the machine's domains with other runs of its own (test workers) names domains only it uses.
     """
-    for attempt in range(3):
-        result = _run_fault(fault, workdir, 1 + (domain_id - 1 + 37 * attempt) % 100, guard_s)
+    if retry_domains is None:
+        retry_domains = [1 + (domain_id - 1 + 37 * attempt) % 100 for attempt in (1, 2)]
+    for domain in (domain_id, *retry_domains):
+        result = _run_fault(fault, workdir, domain, guard_s)
         shared = any(text in result.hold for text in ("publisher conflict", "another console"))
         if not shared or "another console" in fault.reason:
             break
