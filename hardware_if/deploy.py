@@ -36,7 +36,6 @@ import dataclasses
 import os
 import signal
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -73,6 +72,7 @@ from sim.scene import PhysicsParams
 from sim.scene3d import PsmScene
 from sim.scene_stream import LiveScene, SceneStream, StreamScene
 from sim.success_interval import describe_success
+from sim.sweep.stopping import handling
 from sim.tissue import TissueParams
 
 __all__ = ["EXIT_HOLD", "EXIT_INTERRUPTED", "STOP_SIGNALS", "DeployOptions", "DeployReport", "Interrupted", "deploy"]
@@ -118,18 +118,8 @@ class _Stopper:
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[_Stopper]:
-        if threading.current_thread() is not threading.main_thread():
-            yield self  # signals are delivered to the main thread only: nothing to install
-            return
-        previous = {sig: signal.signal(sig, self._handle) for sig in STOP_SIGNALS}
-        # A deploy started from a thread that blocks them inherits them blocked: they would never arrive.
-        previous_mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
-        try:
+        with handling(STOP_SIGNALS, self._handle):
             yield self
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
 
     @contextlib.contextmanager
     def tick(self) -> Iterator[None]:

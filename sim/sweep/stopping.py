@@ -17,10 +17,18 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-__all__ = ["STOP_GRACE_S", "STOP_SIGNALS", "SweepStopped", "ignore_stop_signals", "stop_pool", "stop_signals"]
+__all__ = [
+    "STOP_GRACE_S",
+    "STOP_SIGNALS",
+    "SweepStopped",
+    "handling",
+    "ignore_stop_signals",
+    "stop_pool",
+    "stop_signals",
+]
 
 #: The signals that stop a sweep.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -46,20 +54,27 @@ def _raise(signum: int, _frame: Any) -> None:
 
 
 @contextlib.contextmanager
-def stop_signals() -> Iterator[None]:
-    """SIGINT and SIGTERM raise :class:`SweepStopped` in the block, unblocked if they came blocked; the
-    previous handlers and mask come back after."""
+def handling(signals: Iterable[int], handler: Callable[[int, Any], Any]) -> Iterator[None]:
+    """``handler`` handles ``signals`` in the block, unblocked if they came blocked (a blocked signal would
+    never arrive); the previous handlers and signal mask come back after. Off the main thread, which
+    signals are never delivered to, nothing is installed."""
     if threading.current_thread() is not threading.main_thread():
-        yield  # signals are delivered to the main thread only
+        yield
         return
-    previous = {sig: signal.signal(sig, _raise) for sig in STOP_SIGNALS}
-    previous_mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+    signals = tuple(signals)
+    previous = {sig: signal.signal(sig, handler) for sig in signals}
+    previous_mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, signals)
     try:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def stop_signals() -> contextlib.AbstractContextManager[None]:
+    """SIGINT and SIGTERM raise :class:`SweepStopped` in the block (:func:`handling`)."""
+    return handling(STOP_SIGNALS, _raise)
 
 
 def ignore_stop_signals() -> None:
