@@ -156,7 +156,7 @@ def test_bench_env_reports_rates(tmp_path: Path) -> None:
 def test_bench_train_times_the_recipe_and_confirms_on_unseen_episodes(tmp_path: Path) -> None:
     """`bench train`: a recipe run per seed, timed from outside, its kept policy scored on unseen episodes."""
     path = tmp_path / "train.json"
-    args = ("--tasks", "lift", "--seeds", "4", "--confirm-episodes", "2", "--budget-s", "20")
+    args = ("--tasks", "lift", "--seeds", "4", "--confirm-episodes", "2", "--budget-s", "10")
     result = _cli("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path))
     assert result.returncode == 0, result.stderr
     (run,) = json.loads(path.read_text())["runs"]
