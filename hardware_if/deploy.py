@@ -49,6 +49,7 @@ from hardware_if.arm_pose import TrackingWatch, return_to_start, start_offset
 from hardware_if.commander_watch import DISCOVERY_S
 from hardware_if.endoscope_stream import DEFAULT_RIG
 from hardware_if.errors import DvrkError, HoldError
+from hardware_if.gc_pauses import freeze_startup_heap
 from hardware_if.perceived_env import camera_task
 from hardware_if.readiness import describe_operating_state, dry_run_wait_hint, is_ready_state
 from hardware_if.recording import Recorder
@@ -633,6 +634,7 @@ def _deploy_dvrk(
             except DvrkError as e:
                 raise HoldError("not ready", str(e)) from None
             client.settle_graph(options.wait_s)  # the other programs on the domain, not only the console
+            freeze_startup_heap()  # before the first command: short collector pauses from here on
             _require_exclusive(client, "before the first command")
             if options.site is not None:
                 _check_registered_site(options, config, client, echo)

@@ -34,6 +34,7 @@ import numpy as np
 
 from hardware_if.endoscope_stream import DEFAULT_RIG, EndoscopeStream, camera_topics
 from hardware_if.executor import make_executor
+from hardware_if.gc_pauses import freeze_startup_heap
 from hardware_if.network import apply_local_ros_env, environment_domain_id
 from hardware_if.session import require_ros, ros_session
 from hardware_if.sim_task import PLACEABLE_SITES, TaskArm, TaskTopics, TruthLog
@@ -195,6 +196,7 @@ def run(args: argparse.Namespace) -> int:
             )
             # From here Ctrl-C asks the loop to end: a KeyboardInterrupt raised in a callback that the C++
             # events executor runs is logged as a fatal callback error on its way out.
+            freeze_startup_heap()  # before the loop: short collector pauses from here on
             stop = threading.Event()
             signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
             while node.context.ok() and not stop.is_set():  # spin_once: see hardware_if.executor
