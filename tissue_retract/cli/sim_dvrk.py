@@ -194,9 +194,9 @@ def run(args: argparse.Namespace) -> int:
             node.get_logger().info(
                 f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
             )
+            freeze_startup_heap()  # before the loop: short collector pauses from here on
             # From here Ctrl-C asks the loop to end: a KeyboardInterrupt raised in a callback that the C++
             # events executor runs is logged as a fatal callback error on its way out.
-            freeze_startup_heap()  # before the loop: short collector pauses from here on
             stop = threading.Event()
             signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
             while node.context.ok() and not stop.is_set():  # spin_once: see hardware_if.executor
