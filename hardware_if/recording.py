@@ -29,7 +29,8 @@ stream reader, and says so (:class:`RecordingRead`).
 A file that cannot be written (a full disk, a folder that vanishes or turns read-only, any write error)
 raises :class:`~hardware_if.recording_io.RecordingError`, a hold naming the file and the error, at once
 and once. The torn end is cut off, and what is written afterwards (the hold, the report) is appended as
-plain records if the file system still takes them; the file then reads as far as it got.
+plain records into room kept for them from the start (:data:`~hardware_if.recording_io.RESERVE_BYTES`);
+the file then reads as far as it got.
 """
 
 from __future__ import annotations
@@ -154,6 +155,7 @@ class Recorder:
             write()
         except OSError as e:
             self._file.rewind()
+            self._file.release_reserve()  # the room kept for what follows: the hold, the report
             self._failed = RecordingError(self.path, describe_os_error(e))
             raise self._failed from None
 

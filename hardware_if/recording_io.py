@@ -9,6 +9,13 @@ turned read-only, :meth:`CheckedFile.rewind` cuts the torn group off (which also
 removed, or whose folder vanishes, while it is written would otherwise swallow every later write without
 an error: :meth:`CheckedFile.flush` checks that the path still names the open file.
 
+Cutting the torn end off does not always give back room for the hold: a file system hands a file its
+space a page at a time, and a write that tore within the file's last page frees nothing. So the file keeps
+room for its last records from the start: a hidden file beside it (``.<name>.reserve``) of
+:data:`RESERVE_BYTES`, allocated when the recording opens (a disk without that much room is a hold before
+anything moves) and removed when a write fails (its room then takes the hold and the report) or the file
+closes. A killed run leaves it behind; it holds no data.
+
 Every such error becomes :class:`RecordingError`, a hold (``recording failed: <path>: <os error>``).
 """
 
@@ -21,7 +28,11 @@ from pathlib import Path
 
 from hardware_if.errors import HoldError
 
-__all__ = ["CheckedFile", "RecordingError", "describe_os_error"]
+__all__ = ["RESERVE_BYTES", "CheckedFile", "RecordingError", "describe_os_error"]
+
+#: Room kept for the records written after a failure [bytes]. The hold comes first and takes well under
+#: a kilobyte; the run's report follows if it fits (it lists every episode, a few hundred bytes each).
+RESERVE_BYTES = 64 * 1024
 
 
 def describe_os_error(error: OSError) -> str:
@@ -52,16 +63,38 @@ class CheckedFile:
         path: The file, created or emptied.
 
     Raises:
-        OSError: It cannot be opened.
+        OSError: It cannot be opened, or its file system has no room for :data:`RESERVE_BYTES`.
     """
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self.reserve = path.with_name(f".{path.name}.reserve")
+        self._reserve()
+        try:
+            self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        except OSError:
+            self.release_reserve()
+            raise
         stat = os.fstat(self._fd)
         self._identity = (stat.st_dev, stat.st_ino)
         self._position = 0
         self.good = 0
+
+    def _reserve(self) -> None:
+        """Allocate :data:`RESERVE_BYTES` beside the file (blocks, not a sparse file: the room is taken now)."""
+        fd = os.open(self.reserve, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        try:
+            os.posix_fallocate(fd, 0, RESERVE_BYTES)
+        except OSError:
+            os.close(fd)
+            self.release_reserve()
+            raise
+        os.close(fd)
+
+    def release_reserve(self) -> None:
+        """Give the reserved room back to the file system (safe to call twice, or with the folder gone)."""
+        with contextlib.suppress(OSError):
+            self.reserve.unlink()
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
         """Write all of ``data`` at the end; the end of a complete write becomes :attr:`good`.
@@ -115,7 +148,8 @@ class CheckedFile:
         return True
 
     def close(self) -> None:
-        """Close the file (safe to call twice)."""
+        """Close the file and give back its reserve (safe to call twice)."""
+        self.release_reserve()
         if self._fd >= 0:
             with contextlib.suppress(OSError):
                 os.close(self._fd)

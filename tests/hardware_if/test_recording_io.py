@@ -9,6 +9,7 @@ the hold when the file system has room for it.
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import subprocess
 import sys
@@ -58,10 +59,42 @@ def test_full_file_system_is_a_hold_naming_the_file(tiny: Path) -> None:
     assert recording.truncated
     measured = [m for m in recording if m[0] == "/deploy/measured"]
     assert len(measured) > 1000  # everything up to the last complete chunk
-    # The hold is taken whenever the file system has room left for it: cutting the torn end frees what the
-    # last chunk had written, which is less than a page when the flush came just before the disk filled.
-    hold = {"kind": "hold", "text": str(error)}
-    assert recording.messages[-1][2] == hold or shutil.disk_usage(tiny).free < _PAGE_BYTES
+    # The hold is taken even when cutting the torn end frees nothing (a tear within the file's last page):
+    # the room reserved when the file opened takes it.
+    assert recording.messages[-1][2] == {"kind": "hold", "text": str(error)}
+    assert not (tiny / ".run.mcap.reserve").exists()
+
+
+def test_full_file_system_after_a_tear_within_a_page_still_takes_the_hold(tiny: Path) -> None:
+    """The worst case for the hold: the disk fills with the file's last page partly used and nothing to free.
+
+    The file system is filled, outside the recording, to leave less than a page; the next chunk tears
+    within that page, so cutting it off gives nothing back: only the reserve makes room for the hold.
+    """
+    path = tiny / "run.mcap"
+    recorder = Recorder(path)
+    for _ in range(1000):  # small flushed chunks until the file's last page has no room for a hold record
+        recorder.write("/deploy/measured", PAYLOAD)
+        recorder.flush()
+        if path.stat().st_size % _PAGE_BYTES > _PAGE_BYTES - 200:
+            break
+    assert path.stat().st_size % _PAGE_BYTES > _PAGE_BYTES - 200
+    with (tiny / "other").open("wb") as other, contextlib.suppress(OSError):
+        other.write(b"\0" * (2 * 1024 * 1024))  # everything the file system has left
+    error = _fill(recorder)
+    assert "No space left on device (ENOSPC)" in str(error)
+    recorder.write("/deploy/event", {"kind": "hold", "text": str(error)})
+    recorder.close()
+    assert read_recording(path).messages[-1][2] == {"kind": "hold", "text": str(error)}
+
+
+def test_a_disk_without_room_for_the_reserve_holds_at_the_start(tiny: Path) -> None:
+    """A disk already full: the recording refuses to open (a hold before anything moves), naming the file."""
+    with (tiny / "other").open("wb") as other, contextlib.suppress(OSError):
+        other.write(b"\0" * (2 * 1024 * 1024))
+    with pytest.raises(RecordingError, match=r"recording failed: .*run.mcap: No space left on device \(ENOSPC\)"):
+        Recorder(tiny / "run.mcap")
+    assert not (tiny / "run.mcap").exists() and not (tiny / ".run.mcap.reserve").exists()
 
 
 def test_file_size_limit_is_a_hold(tmp_path: Path) -> None:
