@@ -3,8 +3,10 @@
 A run of the suite draws one base id (from the xdist run's id, which all its workers share, or from the
 process id without xdist) and splits the 100 usable domains into one block per worker, so two workers of
 one run can never meet on a domain. Within its block a worker's tests pick fixed offsets: 0 is the
-worker's own domain (the ``ros_env`` of every test), the fault matrix and the dVRK client's servers take
-the others (:data:`FAULT_OFFSET`, :data:`CLIENT_OFFSET`).
+worker's own domain (the ``ros_env`` of every test), the dVRK client's servers take the last
+:data:`CLIENT_SLOTS` (:func:`client_domain_id`) and the fault matrix the ones between
+(:func:`fault_domain_id`). No offset wraps onto another kind's: a fault's server can never share the domain
+of a test's own sim-dvrk.
 """
 
 from __future__ import annotations
@@ -13,10 +15,10 @@ import os
 
 from hardware_if.network import run_domain_id
 
-#: Offsets within a worker's block: its own domain, then the fault matrix's servers, then the client's.
+#: The worker's own domain, at the start of its block.
 OWN_OFFSET = 0
-FAULT_OFFSET = 1
-CLIENT_OFFSET = 30
+#: Domains at the end of each block for the dVRK client's servers.
+CLIENT_SLOTS = 7
 
 #: Usable domain ids (1..100), as :func:`hardware_if.network.run_domain_id` draws them.
 DOMAINS = 100
@@ -46,3 +48,20 @@ def worker_domain_id(offset: int = OWN_OFFSET) -> int:
     size = block_size()
     base = run_domain_id(_run_seed()) - 1
     return 1 + (base + index * size + offset % size) % DOMAINS
+
+
+def client_domain_id(slot: int) -> int:
+    """The domain of the dVRK client's server ``slot`` (0 .. :data:`CLIENT_SLOTS` - 1)."""
+    if not 0 <= slot < CLIENT_SLOTS:
+        raise ValueError(f"client slot {slot} outside 0..{CLIENT_SLOTS - 1}")
+    return worker_domain_id(block_size() - CLIENT_SLOTS + slot)
+
+
+def fault_domain_id(index: int) -> int:
+    """A domain of the fault matrix for ``index`` (any integer): between the own domain and the client's.
+
+    Faults run one at a time on a worker, so indices that share a domain (the block has fewer fault domains
+    than the matrix has faults and retries) never meet on it.
+    """
+    slots = block_size() - CLIENT_SLOTS - 1
+    return worker_domain_id(1 + index % slots)

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from domains import CLIENT_OFFSET, worker_domain_id
+from domains import client_domain_id
 from dvrk_client import SCRIPTS_HERE, Process, client_dir, missing, run_client, start_sim
 
 #: The client's own scripts that must run to completion, with the input they ask for.
@@ -33,14 +33,10 @@ def _client_present() -> None:
         pytest.fail(reason)
 
 
-def _domain(offset: int) -> int:
-    return worker_domain_id(CLIENT_OFFSET + offset)
-
-
 @pytest.fixture
 def kinematic_sim() -> Iterator[int]:
     """A sim-dvrk without a task scene; yields its domain id."""
-    domain = _domain(0)
+    domain = client_domain_id(0)
     sim = start_sim(domain)
     yield domain
     assert sim.stop() == 0, sim.output()
@@ -91,7 +87,7 @@ def test_client_api_against_sim_dvrk(kinematic_sim: int) -> None:
 def test_dvrk_script_runs_to_completion_on_a_task_scene(script: str) -> None:
     """The dVRK's own test script runs to completion against ``sim-dvrk --task lift``; no wait() times out."""
     arm, stdin = SCRIPTS[script]
-    domain = _domain(1 + list(SCRIPTS).index(script))
+    domain = client_domain_id(1 + list(SCRIPTS).index(script))
     sim = start_sim(domain, "--task", "lift", "--arm", arm)
     try:
         start = time.monotonic()
@@ -112,7 +108,7 @@ def test_dvrk_script_runs_to_completion_on_a_task_scene(script: str) -> None:
 @pytest.mark.parametrize("wrench", ["dvrk", "ideal"])
 def test_client_reads_the_console_force_estimate_in_free_space(wrench: str) -> None:
     """body.measured_cf in free space: the dvrk model's is finite, not zero and moves with pose; ideal's is ~0."""
-    domain = _domain(5 if wrench == "dvrk" else 6)
+    domain = client_domain_id(5 if wrench == "dvrk" else 6)
     sim = start_sim(domain, "--wrench", wrench)
     try:
         output = _finish(run_client(SCRIPTS_HERE / "dvrk_client_wrench.py", domain, "PSM1"), 120.0)

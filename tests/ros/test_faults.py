@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from domains import FAULT_OFFSET, worker_domain_id
+from domains import fault_domain_id
 
 from tissue_retract.faults import FAULTS, Fault, run_fault
 
@@ -25,9 +25,9 @@ from tissue_retract.faults import FAULTS, Fault, run_fault
 def test_fault_ends_in_a_recorded_hold(fault: Fault, tmp_path: Path) -> None:
     """The fault ends with its exit status and reason, no traceback, and the hold in the recording."""
     index = FAULTS.index(fault)
-    domain = worker_domain_id(FAULT_OFFSET + index)  # a domain of this server's own
-    # A retry stays in this worker's block of domains: one 37 ids on ran into another worker's fault.
-    retries = [worker_domain_id(FAULT_OFFSET + index + step) for step in (11, 22)]
+    domain = fault_domain_id(index)
+    # A retry stays in this worker's fault domains: one 37 ids on ran into another worker's fault.
+    retries = [fault_domain_id(index + step) for step in (11, 22)]
     result = run_fault(fault, tmp_path, domain, retry_domains=retries)
     assert result.status == fault.status, result.output
     assert not result.traceback, result.output
