@@ -230,13 +230,37 @@ class ForceLimitStallWatch:
         #: Per tick: counted (held back with tissue held), force [N], time [s], asked and allowed motion [m].
         self._window: collections.deque[tuple[bool, float, float, float, float]] = collections.deque(maxlen=self._size)
         self._count = 0
+        # The window's allowed motion, kept as it slides: summing a 1 s window of 1 kHz ticks on every tick
+        # cost more than the rest of the chain's tick while the limit held a pull back. Non-finite motion is
+        # counted apart (it is no evidence of a crawl), and the sum is rebuilt once per window length so
+        # that its rounding does not build up.
+        self._allowed_m = 0.0
+        self._allowed_nonfinite = 0
+        self._until_rebuild = self._size
         self.stall: ForceLimitStall | None = None
 
     def reset(self) -> None:
         """A new episode: forget the window and the stall."""
         self._window.clear()
         self._count = 0
+        self._allowed_m = 0.0
+        self._allowed_nonfinite = 0
+        self._until_rebuild = self._size
         self.stall = None
+
+    def _slide_allowed(self, leaving: float | None, entering: float) -> None:
+        """Keep the window's allowed-motion sum as one tick leaves (None: none yet) and one enters."""
+        for value, sign in ((leaving, -1), (entering, 1)):
+            if value is None:
+                continue
+            if math.isfinite(value):
+                self._allowed_m += sign * value
+            else:
+                self._allowed_nonfinite += sign
+        self._until_rebuild -= 1
+        if self._until_rebuild <= 0:
+            self._allowed_m = math.fsum(e[4] for e in self._window if math.isfinite(e[4]))
+            self._until_rebuild = self._size
 
     def update(
         self,
@@ -263,14 +287,19 @@ class ForceLimitStallWatch:
             force_source: What ``force_n`` is from (:class:`ForceLimitStall`).
         """
         counted = bool(holding and held_back and math.isfinite(force_n))
+        leaving = None
         if len(self._window) == self._size:
             self._count -= self._window[0][0]
+            leaving = self._window[0][4]
         self._window.append((counted, float(force_n), float(stamp_s), float(asked_m), float(allowed_m)))
         self._count += counted
+        self._slide_allowed(leaving, float(allowed_m))
         if self.stall is not None or len(self._window) < self._size or self._count < self._needed:
             return None
-        allowed = sum(entry[4] for entry in self._window)
-        if not allowed <= self._stall_distance_m:  # NaN motion is no evidence of a stall
+        if self._allowed_nonfinite or not self._allowed_m <= self._stall_distance_m:  # NaN motion: no evidence
+            return None
+        allowed = math.fsum(entry[4] for entry in self._window)  # once per episode: the exact figure
+        if not allowed <= self._stall_distance_m:
             return None
         loads = [force for counted, force, *_ in self._window if counted]
         quarter = max(1, len(loads) // 4)

@@ -117,3 +117,38 @@ def test_non_finite_motion_or_force_is_no_evidence_of_a_stall() -> None:
             stiffness_n_per_m=400.0, stamp_s=i * _PERIOD_S,
         )  # fmt: skip
     assert watch.stall is None
+
+
+def test_a_stall_is_found_on_the_tick_a_whole_window_sum_finds_it() -> None:
+    """The window's motion kept as it slides reports each stall on the same tick as summing the window anew.
+
+    Random motion around the crawl threshold, NaN now and then, over many windows and episodes: the watch
+    must agree, tick for tick, with the plain definition (the window full, enough held-back ticks, no NaN
+    motion, the motion summed over the window at most the crawl distance).
+    """
+    rng = np.random.default_rng(7)
+    watch = ForceLimitStallWatch(1.0, _PERIOD_S)
+    crawl_per_tick_m = watch._stall_distance_m / _WINDOW
+    found = 0
+    for _ in range(40):
+        watch.reset()
+        window: list[tuple[bool, float]] = []
+        for i in range(6 * _WINDOW):
+            allowed = float(rng.uniform(0.55, 1.6)) * crawl_per_tick_m if rng.random() > 0.01 else math.nan
+            held_back = bool(rng.random() < 0.97)
+            window = [*window, (held_back, allowed)][-_WINDOW:]
+            expected = (
+                len(window) == _WINDOW
+                and sum(h for h, _ in window) >= watch._needed
+                and sum(a for _, a in window) <= watch._stall_distance_m
+            )
+            was = watch.stall
+            stall = watch.update(
+                holding=True, held_back=held_back, force_n=0.9, asked_m=4e-3, allowed_m=allowed,
+                stiffness_n_per_m=400.0, stamp_s=i * _PERIOD_S,
+            )  # fmt: skip
+            assert (stall is not None) == (was is None and expected), (i, window)
+            if stall is not None:
+                found += 1
+                break
+    assert 5 <= found <= 35  # the draws put some episodes on each side of the threshold
