@@ -86,10 +86,10 @@ class CheckedFile:
         try:
             os.posix_fallocate(fd, 0, RESERVE_BYTES)
         except OSError:
-            os.close(fd)
             self.release_reserve()
             raise
-        os.close(fd)
+        finally:
+            os.close(fd)
 
     def release_reserve(self) -> None:
         """Give the reserved room back to the file system (safe to call twice, or with the folder gone)."""
