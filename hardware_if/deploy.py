@@ -60,6 +60,7 @@ from hardware_if.session import ros_session
 from hardware_if.task_estimate import TaskEstimate, as_point, format_point
 from hardware_if.wrench_calibration import WrenchCalibration
 from policies.resolve import resolve_policy
+from policies.shipped import PRETRAINED, force_sensing_of, pretrained_path
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from psm_control.errors import ConfigurationError
 from safety.chain import ControlChain
@@ -514,6 +515,15 @@ class _RecordingChain:
         return output
 
 
+def _resolve_policy(options: DeployOptions, env: Any, echo: Any) -> tuple[Any, Any]:
+    """The deploy's policy; for ``pretrained``, says which shipped file the run's force sensing chose."""
+    resolved = resolve_policy(options.policy, env)
+    if options.policy == PRETRAINED:
+        path = pretrained_path(env)
+        echo(f"policy: the shipped one for {force_sensing_of(env)} force sensing ({path.parent.name}/{path.name})")
+    return resolved
+
+
 def _warn_sensing(config: SafetyConfig, source: str, recorder: Recorder, echo: Any) -> None:
     """Tell the user, and the recording, when the force limit is below what the sensing resolves."""
     warning = sensing_warning(config, source)
@@ -537,7 +547,7 @@ def _deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder
         task_env = camera_task(task_env, options.perception.partition(":")[2] or None)
     env = StreamScene(task_env, [recorder], realtime=recorder.mirror is not None, clock=time.time)
     try:
-        policy, reset = resolve_policy(options.policy, env)
+        policy, reset = _resolve_policy(options, env, echo)
         env.reset(seed=options.seed)  # builds the chain once; wrap it so every tick is recorded
         unwrapped: Any = env.unwrapped
         _warn_sensing(unwrapped.safety_config, f"{options.force_sensing} force sensing", recorder, echo)
@@ -645,7 +655,7 @@ def _deploy_dvrk(
             if options.dry_run and not is_ready_state(state, homed):
                 echo(dry_run_wait_hint(options.arm, state, homed, options.wait_s))
             view = RemoteTask(options.task, client, listener)
-            policy, reset = resolve_policy(options.policy, view)
+            policy, reset = _resolve_policy(options, view, echo)
             budget = options.policy_budget_s or view.config.physics.step_s
             checked = _checked_policy(policy, budget)
             if not options.dry_run and not is_ready_state(state, homed):

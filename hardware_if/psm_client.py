@@ -430,6 +430,12 @@ class PsmClient(Node):
         with self._lock:
             return list(self._errors)
 
+    @property
+    def force_sensing(self) -> str:
+        """What the force comes from, as the simulation's presets name it: ``dvrk-calibrated`` or ``dvrk``."""
+        with self._lock:
+            return "dvrk" if self._calibration is None else "dvrk-calibrated"
+
     def set_wrench_calibration(self, calibration: WrenchCalibration | None) -> None:
         """Take the force from ``measured_js`` efforts with a calibration's model removed, not ``measured_cf``."""
         with self._lock:

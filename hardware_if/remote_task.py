@@ -258,6 +258,11 @@ class RemoteTask:
         self.scene = SimpleNamespace(grasp=self)
 
     @property
+    def force_sensing(self) -> str:
+        """The console's force (``dvrk``), or the calibrated one (``dvrk-calibrated``): picks the shipped policy."""
+        return self.client.force_sensing
+
+    @property
     def holding(self) -> bool:
         """The jaw holds the tissue (``scene.grasp.holding``, from ``task/grasped``)."""
         return self.listener.grasped

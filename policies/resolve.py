@@ -1,7 +1,7 @@
 """Loading a policy by name: the one resolver behind evaluate, deploy, sweeps and tuning.
 
 A policy name is ``scripted`` (the rule-based expert), ``random``, ``pretrained`` (the shipped policy of the
-environment's task), ``module:callable`` or a checkpoint path.
+environment's task, trained on its force sensing), ``module:callable`` or a checkpoint path.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import importlib
 from collections.abc import Callable
 from typing import Any
 
-from policies.shipped import PRETRAINED, shipped_policy_path
+from policies.shipped import PRETRAINED, pretrained_path
 from psm_control.errors import ConfigurationError
 from sim.evaluation import Policy
 from sim.expert import ScriptedExpert
@@ -49,7 +49,7 @@ def resolve_policy(spec: str, env: Any, *, allow_other_task: bool = False) -> tu
     if spec == "random":
         return (lambda _obs: env.action_space.sample()), _no_reset
     if spec == PRETRAINED:
-        spec = str(shipped_policy_path(env.spec.id if env.spec is not None else type(env.unwrapped).__name__))
+        spec = str(pretrained_path(env))
     if ":" in spec and not spec.endswith(_CHECKPOINT_SUFFIXES):
         module_name, _, attribute = spec.partition(":")
         try:

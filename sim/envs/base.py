@@ -139,6 +139,11 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.randomizer = Randomizer({**self.config.randomization, **ranges})
         self.use_force_sensing(self.sensing.name)
 
+    @property
+    def force_sensing(self) -> str:
+        """The force-sensing preset the observation's and the controller's force come through."""
+        return self.sensing.name
+
     def use_force_sensing(self, name: str) -> None:
         """Sense the tissue force through the preset ``name`` from the next episode on (:mod:`sim.force_sensing`).
 

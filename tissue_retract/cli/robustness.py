@@ -108,9 +108,9 @@ def safety_overrides(path: Path | None) -> dict[str, object] | None:
     }
 
 
-def _policy_digest(policy: str, task_id: str) -> str | None:
+def _policy_digest(policy: str, task_id: str, force_sensing: str) -> str | None:
     """SHA-256 of the file the policy loads (the shipped one for ``pretrained``); None for code policies."""
-    path = policy_file(policy, task_id)
+    path = policy_file(policy, task_id, force_sensing)
     return file_digest(path) if path is not None else None
 
 
@@ -118,7 +118,7 @@ def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -
     """What decides a sweep's episodes, as recorded in ``sweep.json``."""
     return {
         "policy": args.policy,
-        "policy_sha256": _policy_digest(args.policy, task_id),
+        "policy_sha256": _policy_digest(args.policy, task_id, args.force_sensing),
         "task": task_id,
         "seed": args.seed,
         "package_version": __version__,
