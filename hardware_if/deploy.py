@@ -60,7 +60,7 @@ from hardware_if.session import ros_session
 from hardware_if.task_estimate import TaskEstimate, as_point, format_point
 from hardware_if.wrench_calibration import WrenchCalibration
 from policies.resolve import resolve_policy
-from policies.shipped import PRETRAINED, force_sensing_of, pretrained_path
+from policies.shipped import CAMERA, PRETRAINED, pretrained_path, variant_of
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from psm_control.errors import ConfigurationError
 from safety.chain import ControlChain
@@ -519,8 +519,9 @@ def _resolve_policy(options: DeployOptions, env: Any, echo: Any) -> tuple[Any, A
     """The deploy's policy; for ``pretrained``, says which shipped file the run's force sensing chose."""
     resolved = resolve_policy(options.policy, env)
     if options.policy == PRETRAINED:
-        path = pretrained_path(env)
-        echo(f"policy: the shipped one for {force_sensing_of(env)} force sensing ({path.parent.name}/{path.name})")
+        path, variant = pretrained_path(env), variant_of(env)
+        trained_on = "the camera's site" if variant == CAMERA else f"{variant} force sensing"
+        echo(f"policy: the shipped one trained on {trained_on} ({path.parent.name}/{path.name})")
     return resolved
 
 

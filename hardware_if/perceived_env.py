@@ -38,6 +38,9 @@ class PerceivedTask(RegisteredTask):
     The environment is given the estimator's endoscope, and inked sites if the estimator was trained on them.
     """
 
+    #: Tells :func:`policies.shipped.variant_of` that the observation's site is the camera's.
+    site_from_camera = True
+
     def __init__(self, env: gym.Env, estimator: Any, *, for_training: bool = False) -> None:
         super().__init__(env, registration_error_m=0.0, goal_source="given", for_training=for_training)
         task: Any = env.unwrapped

@@ -1,15 +1,19 @@
-"""The policies shipped with the package, one per task, with the claims made for them.
+"""The policies shipped with the package, one per task and variant, with the claims made for them.
 
 ``policies/pretrained/<task id>.safetensors`` holds a deterministic actor written by this project's own
 ``tissue-retract train`` (the exact command is in the checkpoint's metadata and in the sidecar
 ``<task id>.json``, with the evaluation that backs the claimed success rate). ``--policy pretrained``
-selects the shipped policy of the task being run.
+selects the shipped policy of the task being run, in the variant that fits what the run observes:
 
-The tissue force is part of a policy's observation, and a policy trained on the exact force fails on the
-force a dVRK senses (its console's estimate is off by about a newton in free space: measured, 0 of 100
-episodes). So a policy is shipped per force sensing (:mod:`sim.force_sensing`): the ones trained on the exact
-force at the top of ``policies/pretrained/``, the ones trained on a preset's sensed force in
-``policies/pretrained/<preset>/``. ``--policy pretrained`` takes the one of the run's force sensing.
+* **by force sensing.** The tissue force is part of a policy's observation, and a policy trained on the
+  exact force fails on the force a dVRK senses (its console's estimate is off by about a newton in free
+  space: measured, 0 of 100 episodes). The policies trained on the exact force are at the top of
+  ``policies/pretrained/``, the ones trained on a preset's sensed force (:mod:`sim.force_sensing`) in
+  ``policies/pretrained/<preset>/``.
+* **by where the site comes from.** A policy trained on the true site grasps where the site is; one
+  trained on the endoscope's estimate of it (``train --perception camera``) learns to grasp where the jaws
+  find the flap, a few millimetres from the estimate. With the exact force and the camera's site
+  (``--perception camera``), ``--policy pretrained`` takes ``policies/pretrained/camera/``.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from typing import Any
 from psm_control.errors import UnknownVariantError
 
 __all__ = [
+    "CAMERA",
     "PRETRAINED",
     "ShippedClaim",
     "force_sensing_of",
@@ -31,17 +36,21 @@ __all__ = [
     "shipped_claim",
     "shipped_policy_path",
     "shipped_tasks",
+    "variant_for",
+    "variant_of",
 ]
 
 #: The policy name that selects the shipped policy of a task.
 PRETRAINED = "pretrained"
-#: The force sensing of the policies at the top of ``policies/pretrained/``.
+#: The variant at the top of ``policies/pretrained/``: the exact force and the true site.
 EXACT_SENSING = "ideal"
+#: The variant trained on the exact force and the site estimator's site.
+CAMERA = "camera"
 
 
-def _directory(force_sensing: str = EXACT_SENSING) -> Path:
+def _directory(variant: str = EXACT_SENSING) -> Path:
     top = Path(str(resources.files("policies") / "pretrained"))
-    return top if force_sensing == EXACT_SENSING else top / force_sensing
+    return top if variant == EXACT_SENSING else top / variant
 
 
 def force_sensing_of(env: Any) -> str:
@@ -49,42 +58,61 @@ def force_sensing_of(env: Any) -> str:
     return str(getattr(env.unwrapped, "force_sensing", EXACT_SENSING))
 
 
-def shipped_tasks(force_sensing: str = EXACT_SENSING) -> tuple[str, ...]:
-    """Task ids that have a shipped policy for a force sensing."""
-    return tuple(sorted(path.stem for path in _directory(force_sensing).glob("*.safetensors")))
+def _sees_site_through_camera(env: Any) -> bool:
+    """Some layer of the environment takes the site from the endoscope (``PerceivedTask.site_from_camera``)."""
+    layer = env
+    while layer is not None:
+        if vars(type(layer)).get("site_from_camera", False):
+            return True
+        layer = vars(layer).get("env")
+    return False
 
 
-def shipped_policy_path(task_id: str, force_sensing: str = EXACT_SENSING) -> Path:
-    """The shipped policy file of a task, trained on a force sensing's force.
+def variant_for(force_sensing: str, site_from_camera: bool) -> str:
+    """The shipped variant for a run's force sensing and where its site comes from."""
+    return CAMERA if force_sensing == EXACT_SENSING and site_from_camera else force_sensing
+
+
+def variant_of(env: Any) -> str:
+    """The shipped variant for what an environment observes: its force sensing, or ``camera``."""
+    return variant_for(force_sensing_of(env), _sees_site_through_camera(env))
+
+
+def shipped_tasks(variant: str = EXACT_SENSING) -> tuple[str, ...]:
+    """Task ids that have a shipped policy in a variant."""
+    return tuple(sorted(path.stem for path in _directory(variant).glob("*.safetensors")))
+
+
+def shipped_policy_path(task_id: str, variant: str = EXACT_SENSING) -> Path:
+    """The shipped policy file of a task in a variant (a force sensing, or ``camera``).
 
     Raises:
-        UnknownVariantError: No policy is shipped for that task and sensing (the ones that are are listed).
+        UnknownVariantError: No policy is shipped for that task and variant (the ones that are are listed).
     """
-    path = _directory(force_sensing) / f"{task_id}.safetensors"
+    path = _directory(variant) / f"{task_id}.safetensors"
     if not path.exists():
-        sensing = "" if force_sensing == EXACT_SENSING else f" with {force_sensing} sensing"
-        what = f"pretrained policy for task{sensing}"
-        raise UnknownVariantError(what, task_id, shipped_tasks(force_sensing))
+        suffix = "" if variant == EXACT_SENSING else f" ({variant})"
+        raise UnknownVariantError(f"pretrained policy for task{suffix}", task_id, shipped_tasks(variant))
     return path
 
 
 def pretrained_path(env: Any) -> Path:
-    """The shipped policy ``--policy pretrained`` loads for an environment: its task's, for its force sensing.
+    """The shipped policy ``--policy pretrained`` loads for an environment: its task's, in its variant.
 
     Raises:
-        UnknownVariantError: No policy is shipped for that task and sensing.
+        UnknownVariantError: No policy is shipped for that task and variant.
     """
     task_id = env.spec.id if env.spec is not None else type(env.unwrapped).__name__
-    return shipped_policy_path(task_id, force_sensing_of(env))
+    return shipped_policy_path(task_id, variant_of(env))
 
 
-def policy_file(policy: str, task_id: str, force_sensing: str = EXACT_SENSING) -> Path | None:
+def policy_file(policy: str, task_id: str, variant: str = EXACT_SENSING) -> Path | None:
     """The file a ``--policy`` name loads: the shipped policy for ``pretrained``, else the path if it is a file.
 
     None for policies that are code (``scripted``, ``random``, ``module:callable``) or a missing shipped file.
     """
     if policy == PRETRAINED:
-        path = _directory(force_sensing) / f"{task_id}.safetensors"
+        path = _directory(variant) / f"{task_id}.safetensors"
         return path if path.is_file() else None
     return Path(policy) if Path(policy).is_file() else None
 
@@ -110,9 +138,9 @@ class ShippedClaim:
     ci95: tuple[float, float]
 
 
-def shipped_claim(task_id: str, force_sensing: str = EXACT_SENSING) -> ShippedClaim:
+def shipped_claim(task_id: str, variant: str = EXACT_SENSING) -> ShippedClaim:
     """The claim recorded beside a shipped policy."""
-    data = json.loads(shipped_policy_path(task_id, force_sensing).with_suffix(".json").read_text())
+    data = json.loads(shipped_policy_path(task_id, variant).with_suffix(".json").read_text())
     return ShippedClaim(
         task_id=task_id,
         train_command=str(data["train_command"]),

@@ -131,7 +131,7 @@ def test_deploy_completes_episodes_from_the_images_alone(
     output, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
     assert deploy.returncode == 0, output
     assert "no task topics" in output
-    assert "shipped one for dvrk force sensing (dvrk/TissueRetract-Lift-v0" in output  # the console's force
+    assert "shipped one trained on dvrk force sensing (dvrk/TissueRetract-Lift-v0" in output  # the console's force
     seen = [np.array([float(v) for v in m.split()]) for m in re.findall(r"site seen at (\S+ \S+ \S+)", output)]
     assert len(seen) == 2
     assert 1000 * np.linalg.norm(seen[0] - true_site) < 6.0, (seen[0], true_site)

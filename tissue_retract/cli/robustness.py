@@ -17,7 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from policies.resolve import POLICY_NAMES
-from policies.shipped import policy_file
+from policies.shipped import policy_file, variant_for
 from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig, load_safety_config
@@ -108,9 +108,9 @@ def safety_overrides(path: Path | None) -> dict[str, object] | None:
     }
 
 
-def _policy_digest(policy: str, task_id: str, force_sensing: str) -> str | None:
+def _policy_digest(policy: str, task_id: str, variant: str) -> str | None:
     """SHA-256 of the file the policy loads (the shipped one for ``pretrained``); None for code policies."""
-    path = policy_file(policy, task_id, force_sensing)
+    path = policy_file(policy, task_id, variant)
     return file_digest(path) if path is not None else None
 
 
@@ -118,7 +118,9 @@ def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -
     """What decides a sweep's episodes, as recorded in ``sweep.json``."""
     return {
         "policy": args.policy,
-        "policy_sha256": _policy_digest(args.policy, task_id, args.force_sensing),
+        "policy_sha256": _policy_digest(
+            args.policy, task_id, variant_for(args.force_sensing, getattr(args, "perception", None) is not None)
+        ),
         "task": task_id,
         "seed": args.seed,
         "package_version": __version__,
