@@ -516,7 +516,7 @@ class _RecordingChain:
 
 
 def _resolve_policy(options: DeployOptions, env: Any, echo: Any) -> tuple[Any, Any]:
-    """The deploy's policy; for ``pretrained``, says which shipped file the run's force sensing chose."""
+    """The deploy's policy; for ``pretrained``, says which shipped file fits what the run observes."""
     resolved = resolve_policy(options.policy, env)
     if options.policy == PRETRAINED:
         path, variant = pretrained_path(env), variant_of(env)

@@ -1,7 +1,8 @@
 """Loading a policy by name: the one resolver behind evaluate, deploy, sweeps and tuning.
 
 A policy name is ``scripted`` (the rule-based expert), ``random``, ``pretrained`` (the shipped policy of the
-environment's task, trained on its force sensing), ``module:callable`` or a checkpoint path.
+environment's task, for its force sensing and where its site comes from), ``module:callable`` or a
+checkpoint path.
 """
 
 from __future__ import annotations

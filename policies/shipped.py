@@ -62,7 +62,7 @@ def _sees_site_through_camera(env: Any) -> bool:
     """Some layer of the environment takes the site from the endoscope (``PerceivedTask.site_from_camera``)."""
     layer = env
     while layer is not None:
-        if vars(type(layer)).get("site_from_camera", False):
+        if getattr(type(layer), "site_from_camera", False):  # on the class: a wrapper forwards nothing
             return True
         layer = vars(layer).get("env")
     return False

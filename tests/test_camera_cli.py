@@ -14,12 +14,13 @@ TEXTURES = Path(__file__).resolve().parent / "data" / "textures"
 
 def test_train_perception_writes_its_model_report_and_picture(tmp_path: Path) -> None:
     """A short budget prints the held-out error and the floor, and writes the model, report.json and frames.png."""
-    done = run_cli("train-perception", "--budget-s", "25", "--heldout", "10", "--out", str(tmp_path))
+    done = run_cli("train-perception", "--budget-s", "25", "--heldout", "10", "--any-colour", "--out", str(tmp_path))
     assert done.returncode == 0, done.stderr
     assert "held-out site error (10 frames x 3 sites): median" in done.stdout
     assert "floor of the sites' offset (not visible on an unmarked flap)" in done.stdout
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["report"]["heldout_frames"] == 10 and report["mark_sites"] is False
+    assert report["any_colour"] is True
     assert (tmp_path / "site-estimator.safetensors").stat().st_size > 0
     assert (tmp_path / "frames.png").stat().st_size > 1000
 

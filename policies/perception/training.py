@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from policies.perception.frames import LabelledFrames, render_frames
+from policies.perception.frames import ANY_COLOUR, LabelledFrames, render_frames
 from policies.perception.network import SiteEstimator, SiteNet
 from sim.endoscope import Endoscope
 
@@ -120,6 +120,7 @@ def train_site_estimator(
     heldout: int = 300,
     mark_sites: bool = False,
     textures: Sequence[str] = (),
+    any_colour: bool = False,
     endoscope: Endoscope | None = None,
     progress: Callable[[str], None] = print,
 ) -> tuple[SiteEstimator, TrainingReport]:
@@ -133,6 +134,7 @@ def train_site_estimator(
         heldout: Held-out resets (one frame each).
         mark_sites: Ink the sites on the flap.
         textures: Image files for the flap (none: the procedural textures).
+        any_colour: Train and measure on flaps of any colour (:data:`~policies.perception.frames.ANY_COLOUR`).
         endoscope: The endoscope (default :class:`Endoscope`).
         progress: Receives one line per stage.
     """
@@ -140,6 +142,8 @@ def train_site_estimator(
     endoscope = endoscope or Endoscope()
     deadline = started_s + budget_s
     options: dict[str, Any] = {"endoscope": endoscope, "mark_sites": mark_sites, "textures": textures}
+    if any_colour:
+        options["randomization"] = ANY_COLOUR
     test = render_frames(
         task, [_HELDOUT_SEED_BASE + 10_000 * seed + i for i in range(heldout)], frames_per_reset=1, **options
     )
@@ -169,5 +173,12 @@ def train_site_estimator(
         floor_median_mm=floor_median,
         floor_p95_mm=floor_p95,
     )
-    estimator.info.update(task=task, seed=seed, mark_sites=mark_sites, textures=list(textures), report=report.to_dict())
+    estimator.info.update(
+        task=task,
+        seed=seed,
+        mark_sites=mark_sites,
+        textures=list(textures),
+        any_colour=any_colour,
+        report=report.to_dict(),
+    )
     return estimator, report

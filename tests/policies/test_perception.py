@@ -11,6 +11,7 @@ import torch
 
 from policies.errors import CheckpointError
 from policies.perception import SHIPPED_MODEL, SiteEstimator, SiteNet, load_estimator, render_frames
+from policies.perception.frames import ANY_COLOUR
 from policies.perception.training import error_stats_mm, train_site_estimator
 from sim.endoscope import Endoscope
 
@@ -28,6 +29,21 @@ def test_frames_label_the_sites_in_the_camera_frame() -> None:
     assert np.all(offsets_mm <= np.hypot(3.0, 2.0) + 0.5)
     # Two frames of one reset share the sites in the world, not the images (their appearances differ).
     assert np.abs(frames.images[0].astype(int) - frames.images[1].astype(int)).mean() > 2.0
+
+
+def _site_colours(randomization: dict[str, tuple[float, float]] | None) -> np.ndarray:
+    """The left eye's RGB at the centre site of eight flaps (8, 3)."""
+    frames = render_frames("lift", list(range(21, 29)), frames_per_reset=1, randomization=randomization)
+    pixels = frames.sites_camera_m[:, 0] @ Endoscope().intrinsics().T
+    u, v = (pixels[:, 0] / pixels[:, 2]).astype(int), (pixels[:, 1] / pixels[:, 2]).astype(int)
+    return frames.images[np.arange(8), :3, v, u].astype(float)
+
+
+def test_any_colour_frames_show_flaps_the_tasks_pink_never_does() -> None:
+    """With ANY_COLOUR some flaps are greener than red at the site; the tasks' own flaps never are."""
+    pink, any_colour = _site_colours(None), _site_colours(ANY_COLOUR)
+    assert np.all(pink[:, 0] > pink[:, 1])
+    assert np.any(any_colour[:, 1] > any_colour[:, 0])
 
 
 def test_error_stats_are_distances_in_mm() -> None:

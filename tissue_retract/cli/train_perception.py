@@ -46,6 +46,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--heldout", type=int_in(10, 5000), default=300, help="held-out frames (default: 300)")
     parser.add_argument("--mark-sites", action="store_true", help="ink the sites on the flap (visible offset)")
     parser.add_argument("--texture", nargs="+", metavar="FILE.png", default=[], help="train on these flap images")
+    parser.add_argument(
+        "--any-colour",
+        action="store_true",
+        help="train and measure on flaps of any colour (each channel 0.15-1), not only the tasks' pink ones",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
         heldout=args.heldout,
         mark_sites=args.mark_sites,
         textures=textures,
+        any_colour=args.any_colour,
         progress=lambda line: print(line, flush=True),
     )
     estimator.info["command"] = args.command_line
