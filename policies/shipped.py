@@ -78,6 +78,11 @@ def variant_of(env: Any) -> str:
     return variant_for(force_sensing_of(env), _sees_site_through_camera(env))
 
 
+def _shipped_file(task_id: str, variant: str) -> Path:
+    """Where a task's shipped policy of a variant lives (whether or not it exists)."""
+    return _directory(variant) / f"{task_id}.safetensors"
+
+
 def shipped_tasks(variant: str = EXACT_SENSING) -> tuple[str, ...]:
     """Task ids that have a shipped policy in a variant."""
     return tuple(sorted(path.stem for path in _directory(variant).glob("*.safetensors")))
@@ -89,7 +94,7 @@ def shipped_policy_path(task_id: str, variant: str = EXACT_SENSING) -> Path:
     Raises:
         UnknownVariantError: No policy is shipped for that task and variant (the ones that are are listed).
     """
-    path = _directory(variant) / f"{task_id}.safetensors"
+    path = _shipped_file(task_id, variant)
     if not path.exists():
         suffix = "" if variant == EXACT_SENSING else f" ({variant})"
         raise UnknownVariantError(f"pretrained policy for task{suffix}", task_id, shipped_tasks(variant))
@@ -112,7 +117,7 @@ def policy_file(policy: str, task_id: str, variant: str = EXACT_SENSING) -> Path
     None for policies that are code (``scripted``, ``random``, ``module:callable``) or a missing shipped file.
     """
     if policy == PRETRAINED:
-        path = _directory(variant) / f"{task_id}.safetensors"
+        path = _shipped_file(task_id, variant)
         return path if path.is_file() else None
     return Path(policy) if Path(policy).is_file() else None
 
