@@ -33,7 +33,7 @@ from hardware_if.endoscope_stream import DEFAULT_RIG, camera_topics
 from hardware_if.errors import HoldError
 from hardware_if.executor import make_executor
 from hardware_if.psm_client import PsmClient
-from hardware_if.session import stop_spin_thread
+from hardware_if.session import close_spun_node
 from hardware_if.task_estimate import TaskEstimate
 from sim.endoscope import StereoFrame, look_at
 from sim.tissue import SITE_NAMES
@@ -212,7 +212,4 @@ class CameraSite(Node):
     def close(self) -> None:
         """Stop spinning and destroy the node."""
         self._running = False
-        if not stop_spin_thread(self._thread, self.get_logger()):
-            return
-        self._executor.shutdown(timeout_sec=1.0)
-        self.destroy_node()
+        close_spun_node(self, self._thread, self._executor)

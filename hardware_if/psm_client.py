@@ -31,7 +31,7 @@ from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
 from hardware_if.executor import make_executor
-from hardware_if.session import stop_spin_thread
+from hardware_if.session import close_spun_node
 from hardware_if.task_estimate import JawReading
 from hardware_if.wrench_calibration import WrenchCalibration
 from psm_control.commands import JointCommand, MeasuredState
@@ -168,13 +168,8 @@ class PsmClient(Node):
     def close(self) -> None:
         """Stop spinning and destroy the node (safe to call twice)."""
         self._running = False
-        if not stop_spin_thread(self._thread, self.get_logger()):
-            return
-        self._thread = None
-        if self._executor is not None:
-            self._executor.shutdown(timeout_sec=1.0)
-            self._executor = None
-        self.destroy_node()
+        if close_spun_node(self, self._thread, self._executor):
+            self._thread = self._executor = None
 
     def __enter__(self) -> PsmClient:
         return self.start()

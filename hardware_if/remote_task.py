@@ -32,7 +32,7 @@ from hardware_if.errors import DvrkTimeoutError
 from hardware_if.executor import make_executor
 from hardware_if.psm_client import PsmClient
 from hardware_if.registration import console_base_frame, grasp_point
-from hardware_if.session import stop_spin_thread
+from hardware_if.session import close_spun_node
 from hardware_if.sim_task import task_topic
 from hardware_if.task_estimate import TaskEstimate
 from psm_control.quaternion import quaternion_xyzw
@@ -170,10 +170,7 @@ class TaskListener(Node):
     def close(self) -> None:
         """Stop spinning and destroy the node."""
         self._running = False
-        if not stop_spin_thread(self._thread, self.get_logger()):
-            return
-        self._executor.shutdown(timeout_sec=1.0)
-        self.destroy_node()
+        close_spun_node(self, self._thread, self._executor)
 
     def __enter__(self) -> TaskListener:
         return self

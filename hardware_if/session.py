@@ -13,10 +13,12 @@ from typing import Any
 
 from hardware_if.errors import RosNotAvailableError
 
-__all__ = ["SPIN_JOIN_TIMEOUT_S", "require_ros", "ros_session", "stop_spin_thread"]
+__all__ = ["SPIN_JOIN_TIMEOUT_S", "close_spun_node", "require_ros", "ros_session", "stop_spin_thread"]
 
 #: How long closing a node waits for its spin thread to leave ``spin_once`` (which waits 0.05 s at most).
 SPIN_JOIN_TIMEOUT_S = 5.0
+#: How long closing a node waits for its executor to finish what it is running.
+EXECUTOR_SHUTDOWN_TIMEOUT_S = 1.0
 
 
 def require_ros() -> Any:
@@ -68,4 +70,23 @@ def stop_spin_thread(thread: threading.Thread | None, logger: Any) -> bool:
     if thread.is_alive():
         logger.warning(f"{thread.name}: still spinning after {SPIN_JOIN_TIMEOUT_S:.0f} s; node left to the exit")
         return False
+    return True
+
+
+def close_spun_node(node: Any, thread: threading.Thread | None, executor: Any) -> bool:
+    """Destroy a node that spins on its own executor and thread, in the order rclpy supports.
+
+    The thread leaves ``spin_once`` first, then the executor shuts down (the events executor clears the
+    callbacks it gave the middleware for the node's entities), then the node is destroyed. Returns False,
+    leaving the node to the process's exit, while the thread still spins or the executor has not shut down
+    within :data:`EXECUTOR_SHUTDOWN_TIMEOUT_S`: destroying it then can crash the process.
+    """
+    if not stop_spin_thread(thread, node.get_logger()):
+        return False
+    if executor is not None and executor.shutdown(timeout_sec=EXECUTOR_SHUTDOWN_TIMEOUT_S) is False:
+        node.get_logger().warning(
+            f"executor still busy after {EXECUTOR_SHUTDOWN_TIMEOUT_S:.0f} s; node left to the exit"
+        )
+        return False
+    node.destroy_node()
     return True
