@@ -3,8 +3,9 @@
 Table 1 trains each algorithm on Tasks I-III (``TissueRetract-Lift-v0``, ``-Target-v0``,
 ``-MultiSite-v0``) with 100 demonstrations and seeds 1, 2, 3; Table 2 varies the demonstrations
 (25 / 50 / 100) on Task III. Each run is one ``train`` in its own process, in its own directory, so an
-interrupted reproduction resumes run by run. The outcome is written as markdown tables with our
-success rate (mean over seeds, 95 % t-interval) beside the paper's, and learning curves as PNG.
+interrupted reproduction resumes run by run. The outcome is a report page (HTML and Markdown) with our
+success rate (mean over seeds, 95 % t-interval) beside the paper's per cell, the learning curves, and
+``results.json`` with every number on the page and the code every run trained on (:func:`code_identity`).
 """
 
 from __future__ import annotations
@@ -37,13 +38,18 @@ from sim.sweep.page import Page, percent
 from sim.sweep.stopping import stop_pool
 
 __all__ = [
+    "CODE_DIRS",
     "OUTCOME_FILE",
     "PAPER_TABLE1",
     "PAPER_TABLE2",
     "TASKS",
+    "Cell",
     "Run",
     "RunOutcome",
+    "cells",
+    "code_identity",
     "plan",
+    "plot_cells",
     "plot_curves",
     "reproduce",
     "run_all",
@@ -95,10 +101,11 @@ class RunOutcome:
     wall_seconds: float = 0.0
     steps_per_second: float = float("nan")
     resumed_from: int = 0
+    code: dict[str, Any] = field(default_factory=dict)
 
 
 def plan(
-    out_dir: Path,
+    runs_dir: Path,
     *,
     episodes: int = 1000,
     tasks: Mapping[str, str] = TASKS,
@@ -111,7 +118,8 @@ def plan(
     eval_episodes: int = 50,
     overrides: Mapping[str, Any] | None = None,
 ) -> list[Run]:
-    """The runs of Table 1 and of Table 2's extra demonstration counts (100 demos are shared with Table 1)."""
+    """The runs of Table 1 and of Table 2's extra demonstration counts (100 demos are shared with Table 1),
+    each in its own folder under ``runs_dir``."""
     extra = tuple(sorted((overrides or {}).items()))
     runs = []
     grid: list[tuple[str, str, int]] = [(task, algo, demos) for task in tasks for algo in algos]
@@ -119,7 +127,7 @@ def plan(
         grid += [(ablation_task, algo, n) for algo in algos if algo in PAPER_TABLE2 for n in ablation_demos]
     for task, algo, n_demos in grid:
         for seed in seeds:
-            run_dir = out_dir / "runs" / f"{task}-{algo}-d{n_demos}-s{seed}"
+            run_dir = runs_dir / f"{task}-{algo}-d{n_demos}-s{seed}"
             runs.append(
                 Run(task, tasks[task], algo, seed, n_demos, episodes, eval_every, eval_episodes, run_dir, extra)
             )
@@ -147,8 +155,9 @@ def _execute(run: Run) -> RunOutcome:
     result = train(spec, config)
     curve = _read_curve(run.out_dir / "eval.csv")
     success = curve[-1][1] if curve else result.final_success
+    code = code_identity()
     outcome = RunOutcome(
-        run, success, curve, time.perf_counter() - start, result.learning_steps_per_second, result.resumed_from
+        run, success, curve, time.perf_counter() - start, result.learning_steps_per_second, result.resumed_from, code
     )
     record = {
         "episodes": run.episodes,
@@ -157,7 +166,8 @@ def _execute(run: Run) -> RunOutcome:
         "wall_seconds": outcome.wall_seconds,
         "steps_per_second": outcome.steps_per_second,
         "resumed_from": outcome.resumed_from,
-        "commit": _commit(),
+        "commit": code.get("commit", ""),
+        "code": code,
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
     write_strict_json(run.out_dir / OUTCOME_FILE, record, indent=1)
@@ -174,23 +184,38 @@ def _read_outcome(run: Run) -> RunOutcome | None:
     curve = [(int(e), float(s)) for e, s in record["curve"]]
     return RunOutcome(
         run, float(record["success"]), curve, float(record["wall_seconds"]), float(record["steps_per_second"]),
-        int(record.get("resumed_from", 0)),
+        int(record.get("resumed_from", 0)), dict(record.get("code", {})),
     )  # fmt: skip
 
 
-def _commit() -> str:
-    """The git commit of the code that ran, or "" outside a checkout."""
+#: The folders whose code decides what a run learns: a result names the git tree each had.
+CODE_DIRS = ("psm_control", "safety", "sim", "policies")
+
+
+def _git(*args: str) -> str | None:
+    """A git command's output in the package's checkout, or None outside one."""
     try:
         out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).parent,
-            capture_output=True,
-            text=True,
-            timeout=10,
+            ["git", *args], cwd=Path(__file__).parent, capture_output=True, text=True, timeout=30, check=False
         )
     except (OSError, subprocess.SubprocessError):
-        return ""
-    return out.stdout.strip() if out.returncode == 0 else ""
+        return None
+    return out.stdout.strip() if out.returncode == 0 else None
+
+
+def code_identity() -> dict[str, Any]:
+    """The code that runs: the commit, the git tree of each of :data:`CODE_DIRS` at that commit, and whether
+    any of them has changes not committed (then the trees do not name what ran). Empty outside a checkout.
+
+    Two runs with the same trees trained on the same code whatever their commits (a later commit that
+    changed only the documentation leaves them equal).
+    """
+    commit = _git("rev-parse", "--short", "HEAD")
+    if commit is None:
+        return {}
+    trees = {name: _git("rev-parse", f"HEAD:{name}") or "" for name in CODE_DIRS}
+    changes = _git("status", "--porcelain", "--untracked-files=no", "--", *CODE_DIRS)
+    return {"commit": commit, "trees": trees, "uncommitted_changes": changes is None or bool(changes)}
 
 
 def _read_curve(path: Path) -> list[tuple[int, float]]:
@@ -260,41 +285,152 @@ def _mean_ci(values: Sequence[float]) -> tuple[float, float]:
     return float(x.mean()), float(t * x.std(ddof=1) / math.sqrt(len(x)))
 
 
-def table_blocks(outcomes: Sequence[RunOutcome], demos: int = 100) -> list[tuple[str, list[str], list[list[str]]]]:
-    """Table 1 (ours beside the paper's) and, when present, Table 2, as (heading, header, rows)."""
-    by: dict[tuple[str, str, int], list[float]] = {}
-    for o in outcomes:
-        by.setdefault((o.run.task, o.run.algo, o.run.demos), []).append(100 * o.success)
+@dataclass(frozen=True)
+class Cell:
+    """One cell of the paper's tables: an algorithm on a task with a number of demonstrations, over seeds.
+
+    Attributes:
+        table: 1 or 2.
+        task: The task label (``I``, ``II``, ``III``).
+        algo: The algorithm.
+        demos: Demonstrations.
+        seeds: The seeds that ran.
+        success_pct: Each seed's final success [%], in the order of ``seeds``.
+        paper_mean_pct: The paper's mean success [%], or None where the paper has none.
+        paper_ci_pct: The paper's 95 % interval half-width [%]. The paper gives none in Table 2: its cells
+            take Table 1's for Task III and the algorithm, the paper's own spread over seeds.
+    """
+
+    table: int
+    task: str
+    algo: str
+    demos: int
+    seeds: tuple[int, ...]
+    success_pct: tuple[float, ...]
+    paper_mean_pct: float | None
+    paper_ci_pct: float | None
+
+    @property
+    def mean_pct(self) -> float:
+        """Our mean over seeds [%]."""
+        return _mean_ci(self.success_pct)[0]
+
+    @property
+    def ci_pct(self) -> float:
+        """Our 95 % Student-t interval half-width over seeds [%]."""
+        return _mean_ci(self.success_pct)[1]
+
+    @property
+    def meets_paper(self) -> bool | None:
+        """Our mean is at or above the paper's mean minus its interval; None where the paper has no number."""
+        if self.paper_mean_pct is None:
+            return None
+        return self.mean_pct >= self.paper_mean_pct - (self.paper_ci_pct or 0.0)
+
+
+def cells(outcomes: Sequence[RunOutcome], demos: int = 100) -> list[Cell]:
+    """Table 1's cells (``demos`` demonstrations), then Table 2's when Task III ran with several counts."""
+    by: dict[tuple[str, str, int], list[RunOutcome]] = {}
+    for o in sorted(outcomes, key=lambda o: o.run.seed):
+        by.setdefault((o.run.task, o.run.algo, o.run.demos), []).append(o)
     tasks = list(dict.fromkeys(o.run.task for o in outcomes))
     algos = [a for a in ALGORITHMS if any(o.run.algo == a for o in outcomes)]
 
-    def cell(values: list[float] | None) -> str:
-        if not values:
-            return "-"
-        mean, ci = _mean_ci(values)
-        return f"{mean:.0f} +- {ci:.0f}"
+    def cell(table: int, task: str, algo: str, n: int, paper: tuple[float | None, float | None]) -> Cell | None:
+        runs = by.get((task, algo, n))
+        if not runs:
+            return None
+        seeds = tuple(o.run.seed for o in runs)
+        return Cell(table, task, algo, n, seeds, tuple(100 * o.success for o in runs), *paper)
 
-    rows = []
-    for task in tasks:
-        row = [task]
-        for algo in algos:
-            paper = PAPER_TABLE1.get(task, {}).get(algo)
-            ref = f"{paper[0]:g} +- {paper[1]:g}" if paper else "-"
-            row.append(f"{cell(by.get((task, algo, demos)))} / {ref}")
-        rows.append(row)
+    table1 = [
+        cell(1, task, algo, demos, PAPER_TABLE1.get(task, {}).get(algo, (None, None)))
+        for task in tasks
+        for algo in algos
+    ]
+    ablation = sorted({o.run.demos for o in outcomes if o.run.task == "III"} | {demos})
+    table2 = []
+    if "III" in tasks and len(ablation) > 1:
+        for algo in (a for a in algos if a in PAPER_TABLE2):
+            spread = PAPER_TABLE1["III"].get(algo, (None, None))[1]
+            for n in ablation:
+                paper = PAPER_TABLE2[algo].get(n)
+                table2.append(cell(2, "III", algo, n, (None if paper is None else float(paper), spread)))
+    return [c for c in table1 + table2 if c is not None]
+
+
+def _ours(cell: Cell | None) -> str:
+    return "-" if cell is None else f"{cell.mean_pct:.0f} +- {cell.ci_pct:.0f}"
+
+
+def _paper(cell: Cell) -> str:
+    if cell.paper_mean_pct is None:
+        return "-"
+    return f"{cell.paper_mean_pct:g}" + (f" +- {cell.paper_ci_pct:g}" if cell.table == 1 else "")
+
+
+def table_blocks(outcomes: Sequence[RunOutcome], demos: int = 100) -> list[tuple[str, list[str], list[list[str]]]]:
+    """Table 1 (ours beside the paper's) and, when present, Table 2, as (heading, header, rows)."""
+    found = cells(outcomes, demos)
+    table1 = {(c.task, c.algo): c for c in found if c.table == 1}
+    table2 = {(c.algo, c.demos): c for c in found if c.table == 2}
+    tasks = list(dict.fromkeys(c.task for c in table1.values()))
+    algos = [a for a in ALGORITHMS if any(c.algo == a for c in found)]
+
+    def paired(cell: Cell | None, paper: str) -> str:
+        return f"{_ours(cell)} / {paper}"
+
+    rows = [
+        [task, *(paired(table1.get((task, a)), _paper_or_dash(PAPER_TABLE1.get(task, {}).get(a))) for a in algos)]
+        for task in tasks
+    ]
     blocks = [(f"Table 1: success % ({demos} demonstrations; ours / paper)", ["Task", *algos], rows)]
-    ablation = sorted(
-        {o.run.demos for o in outcomes if o.run.task == "III"} - {demos} | ({demos} if "III" in tasks else set())
-    )
-    if len(ablation) > 1:
+    if table2:
+        counts = sorted({n for _, n in table2})
         rows = [
-            [algo, *(f"{cell(by.get(('III', algo, n)))} / {PAPER_TABLE2[algo].get(n, '-')}" for n in ablation)]
+            [algo, *(paired(table2.get((algo, n)), f"{PAPER_TABLE2[algo].get(n, '-')}") for n in counts)]
             for algo in algos
             if algo in PAPER_TABLE2
         ]
         heading = "Table 2: Task III success % by demonstrations (ours / paper)"
-        blocks.append((heading, ["Algorithm", *(str(n) for n in ablation)], rows))
+        blocks.append((heading, ["Algorithm", *(str(n) for n in counts)], rows))
     return blocks
+
+
+def _paper_or_dash(paper: tuple[float, float] | None) -> str:
+    return "-" if paper is None else f"{paper[0]:g} +- {paper[1]:g}"
+
+
+def plot_cells(found: Sequence[Cell], path: Path) -> Path:
+    """Ours (mean, 95 % interval over seeds) beside the paper's per cell; one panel per table.
+
+    A cell below the paper's mean minus its interval is drawn in red.
+    """
+    tables = sorted({c.table for c in found})
+    fig = Figure(figsize=(11, 3.4 * len(tables)))
+    axes = fig.subplots(len(tables), 1, squeeze=False)
+    for ax, table in zip(axes[:, 0], tables, strict=True):
+        row = [c for c in found if c.table == table]
+        x = np.arange(len(row))
+        for i, c in enumerate(row):
+            colour = "#b00020" if c.meets_paper is False else "#1f77b4"
+            ax.errorbar(i - 0.15, c.mean_pct, yerr=c.ci_pct, fmt="o", color=colour, capsize=3)
+            ax.plot([i - 0.15] * len(c.success_pct), c.success_pct, ".", color=colour, alpha=0.4)
+            if c.paper_mean_pct is not None:
+                ax.errorbar(
+                    i + 0.15, c.paper_mean_pct, yerr=c.paper_ci_pct or 0.0, fmt="s", mfc="none", color="#555",
+                    capsize=3,
+                )  # fmt: skip
+        labels = [f"{c.task} {c.algo}" if table == 1 else f"{c.algo} {c.demos}" for c in row]
+        ax.set_xticks(x, labels, rotation=45, ha="right", fontsize=8)
+        ax.set_ylim(-5, 105)
+        ax.set_ylabel("success %")
+        ax.set_title(f"Table {table}: ours (dots: each seed; circle: mean, 95 % interval) / paper (square)")
+        ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    return path
 
 
 def plot_curves(outcomes: Sequence[RunOutcome], path: Path, demos: int = 100) -> Path:
@@ -323,25 +459,98 @@ def plot_curves(outcomes: Sequence[RunOutcome], path: Path, demos: int = 100) ->
     return path
 
 
+def _code_summary(outcomes: Sequence[RunOutcome]) -> tuple[dict[str, Any] | None, str]:
+    """The code every run trained on (None if they differ or it is unknown) and a line that says so."""
+    versions = {json.dumps(o.code.get("trees"), sort_keys=True) for o in outcomes}
+    dirs = ", ".join(CODE_DIRS)
+    if not outcomes or any(not o.code or o.code.get("uncommitted_changes") for o in outcomes):
+        return None, f"unknown for some runs: not in a git checkout, or {dirs} had uncommitted changes"
+    if len(versions) > 1:
+        return None, f"runs trained on {len(versions)} different versions of {dirs} (see Every run)"
+    code = dict(outcomes[0].code)
+    commits = sorted({o.code["commit"] for o in outcomes})
+    return code, f"{dirs} as at commit {code['commit']} for every run (run at {', '.join(commits)})"
+
+
+def _cell_record(cell: Cell) -> dict[str, Any]:
+    return {
+        "table": cell.table,
+        "task": cell.task,
+        "algo": cell.algo,
+        "demos": cell.demos,
+        "seeds": list(cell.seeds),
+        "success_pct": list(cell.success_pct),
+        "mean_pct": cell.mean_pct,
+        "ci95_pct": cell.ci_pct,
+        "paper_mean_pct": cell.paper_mean_pct,
+        "paper_ci95_pct": cell.paper_ci_pct,
+        "meets_paper": cell.meets_paper,
+    }
+
+
+def _run_record(o: RunOutcome) -> dict[str, Any]:
+    return {
+        "task": o.run.task,
+        "task_id": o.run.task_id,
+        "algo": o.run.algo,
+        "demos": o.run.demos,
+        "seed": o.run.seed,
+        "episodes": o.run.episodes,
+        "success_pct": 100 * o.success,
+        "wall_seconds": o.wall_seconds,
+        "env_steps_per_second": o.steps_per_second,
+        "resumed_from_episode": o.resumed_from,
+        "curve": [{"episode": e, "success_pct": 100 * v} for e, v in o.curve],
+        "code": o.code,
+    }
+
+
 def reproduce(
     out_dir: Path, runs: Sequence[Run], jobs: int = 1, backend: str = "local", command: str = ""
 ) -> tuple[Path, list[RunOutcome]]:
-    """Run the protocol (on ``backend``, as :func:`run_all`) and write ``results.md``, ``results.html`` and
-    ``curves.png``; ``command`` is the command line shown on the page. Returns the Markdown's path."""
+    """Run the protocol (on ``backend``, as :func:`run_all`) and write the report into ``out_dir``:
+    ``results.md`` and ``results.html`` (the same page), ``results.json`` (every number on it, every run's
+    learning curve and the code it trained on), ``results-cells.png`` and ``results-curves.png``.
+    ``command`` is the command line shown on the page. Returns the Markdown's path."""
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    outcomes = run_all(runs, jobs, backend)
+    outcomes = sorted(run_all(runs, jobs, backend), key=lambda o: (o.run.task, o.run.algo, o.run.demos, o.run.seed))
     wall = time.perf_counter() - start
     demos = max((r.demos for r in runs), default=100)
-    plot_curves(outcomes, out_dir / "curves.png", demos)
+    found = cells(outcomes, demos)
+    code, code_line = _code_summary(outcomes)
+    below = [c for c in found if c.meets_paper is False]
+    episodes = max((r.episodes for r in runs), default=0)
+    write_strict_json(
+        out_dir / "results.json",
+        {
+            "command": command,
+            "package_version": __version__,
+            "commit": None if code is None else code["commit"],
+            "code": code,
+            "episodes_per_run": episodes,
+            "eval_every": max((r.eval_every for r in runs), default=0),
+            "eval_episodes": max((r.eval_episodes for r in runs), default=0),
+            "processes": jobs,
+            "backend": backend,
+            "cells": [_cell_record(c) for c in found],
+            "runs": [_run_record(o) for o in outcomes],
+        },
+        indent=1,
+    )
+    plot_cells(found, out_dir / "results-cells.png")
+    plot_curves(outcomes, out_dir / "results-curves.png", demos)
     page = Page("Reproduction of the seed paper's evaluation")
     page.card(
         [
-            ("runs", f"{len(runs)} of {max((r.episodes for r in runs), default=0)} training episodes each"),
+            ("runs", f"{len(runs)} of {episodes} training episodes each, seeds {_seeds(runs)}"),
             ("processes", f"{jobs} in parallel ({backend})"),
             ("wall time", f"{wall:.0f} s in this sitting (runs finished earlier are read with their own times)"),
-            ("package", f"tissue-retract {__version__}, commit {_commit() or 'unknown'}"),
-        ]
+            ("package", f"tissue-retract {__version__}"),
+            ("code", code_line),
+            ("below the paper", f"{len(below)} of {len(found)} cells" + "".join(f"; {_label(c)}" for c in below)),
+        ],
+        alert=[label for label, bad in (("code", code is None), ("below the paper", bool(below))) if bad],
     )
     if command:
         page.heading("Command")
@@ -349,10 +558,27 @@ def reproduce(
     for heading, header, rows in table_blocks(outcomes, demos):
         page.heading(heading)
         page.table(header, rows)
-    page.figure(out_dir / "curves.png", "mean evaluation success against training episodes")
+    page.heading("Ours against the paper, per cell")
+    page.paragraph(
+        "A cell is below the paper when our mean over seeds is under the paper's mean minus its 95 % interval. "
+        "The paper gives no interval in Table 2: its cells take Table 1's for Task III and the algorithm."
+    )
+    page.figure(out_dir / "results-cells.png", "ours (each seed, and the mean with its 95 % interval) beside the paper")
+    page.table(
+        ["Table", "Task", "Algorithm", "Demos", "Each seed", "Ours", "Paper", "At or above the paper"],
+        [
+            [
+                str(c.table), c.task, c.algo, str(c.demos), " / ".join(f"{v:.0f}" for v in c.success_pct),
+                _ours(c), _paper(c), {True: "yes", False: "no", None: "-"}[c.meets_paper],
+            ]
+            for c in found
+        ],
+    )  # fmt: skip
+    page.heading("Learning curves")
+    page.figure(out_dir / "results-curves.png", "mean evaluation success over seeds against training episodes")
     page.heading("Every run")
     page.table(
-        ["Task", "Algorithm", "Demos", "Seed", "Success", "Wall time", "Env steps/s once learning"],
+        ["Task", "Algorithm", "Demos", "Seed", "Success", "Wall time", "Env steps/s once learning", "Commit"],
         [
             [
                 o.run.task,
@@ -362,9 +588,19 @@ def reproduce(
                 percent(o.success),
                 f"{o.wall_seconds:.0f} s" + (f" (from episode {o.resumed_from})" if o.resumed_from else ""),
                 f"{o.steps_per_second:.0f}",
+                str(o.code.get("commit", "unknown"))
+                + (" (uncommitted changes)" if o.code.get("uncommitted_changes") else ""),
             ]
             for o in outcomes
         ],
     )
     path = page.write(out_dir, stem="results")["report_md"]
     return path, outcomes
+
+
+def _seeds(runs: Sequence[Run]) -> str:
+    return ", ".join(str(s) for s in sorted({r.seed for r in runs}))
+
+
+def _label(cell: Cell) -> str:
+    return f"Task {cell.task} {cell.algo} ({cell.demos} demos) {cell.mean_pct:.0f} % against {_paper(cell)}"

@@ -38,7 +38,7 @@ def test_tables_put_ours_beside_the_papers() -> None:
 
 
 def test_reproduce_smoke_on_the_toy_task(tmp_path: Path) -> None:
-    """reproduce trains runs in parallel processes and writes results.md with the tables and curves.png."""
+    """reproduce trains runs in parallel processes and writes results.md with the tables and the curves."""
     runs = plan(
         tmp_path, episodes=2, tasks={"toy": TOY_TASK_ID}, algos=("ddpg", "ddpgbc"), seeds=(1, 2), demos=2,
         eval_every=1, eval_episodes=1, overrides=TINY,
@@ -47,7 +47,7 @@ def test_reproduce_smoke_on_the_toy_task(tmp_path: Path) -> None:
     assert len(outcomes) == 4 and all(len(o.curve) == 2 for o in outcomes)
     text = path.read_text()
     assert "| toy |" in text and "Table 1" in text
-    assert (tmp_path / "curves.png").stat().st_size > 1000
+    assert (tmp_path / "results-curves.png").stat().st_size > 1000
 
 
 def test_reproduce_reads_finished_runs_instead_of_training_them_again(tmp_path: Path) -> None:

@@ -35,7 +35,7 @@ def test_reproduce_writes_tables_beside_the_paper(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     text = (tmp_path / "results.md").read_text()
     assert "83 +- 0.7" in text  # the paper's DDPG on Task I, beside ours
-    assert (tmp_path / "curves.png").stat().st_size > 1000
+    assert (tmp_path / "results-curves.png").stat().st_size > 1000
 
 
 def test_unknown_algorithm_is_refused() -> None:

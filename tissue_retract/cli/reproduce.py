@@ -2,9 +2,11 @@
 
 Table 1: DDPG, SQIL, DDPGBC, CoL and DEX on Tasks I-III with 100 demonstrations, seeds 1-3;
 Table 2: 25 / 50 / 100 demonstrations on Task III. Every run is one ``train`` in its own process and
-folder (an interrupted reproduction resumes run by run). Writes ``results.md`` (our success, mean over
-seeds with a 95 % interval, beside the paper's) and ``curves.png`` to ``--out``. The full budget
-(1,000 episodes per run, as the paper's code) takes hours on a laptop-class CPU; ``--budget`` shortens it.
+folder under ``--runs`` (an interrupted reproduction resumes run by run). Writes the report to ``--out``:
+``results.md`` and ``results.html`` (our success, mean over seeds with a 95 % interval, beside the paper's,
+per cell and as learning curves) and ``results.json`` (every number, every run's curve, the code it trained
+on). The full budget (1,000 episodes per run, as the paper's code) takes hours on a laptop-class CPU;
+``--budget`` shortens it.
 """
 
 from __future__ import annotations
@@ -31,7 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="local",
         help="local process pool, or Ray (RAY_ADDRESS, else a local cluster on 127.0.0.1; the dist extra)",
     )
-    parser.add_argument("--out", type=Path, default=Path("runs/reproduce"), help="output folder")
+    parser.add_argument("--out", type=Path, default=Path("runs/reproduce"), help="the report's folder")
+    parser.add_argument("--runs", type=Path, default=None, help="the training runs' folders (default: OUT/runs)")
     parser.add_argument("--tasks", default="I,II,III", help="comma-separated tasks among I, II, III")
     parser.add_argument("--algos", default=",".join(ALGORITHMS), help="comma-separated algorithms")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="seeds (default 1 2 3)")
@@ -51,8 +54,9 @@ def run(args: argparse.Namespace) -> int:
     for algo in algos:
         if algo not in ALGORITHMS:
             raise UnknownVariantError("algos", algo, ALGORITHMS)
+    runs_dir = args.runs if args.runs is not None else args.out / "runs"
     runs = plan(
-        args.out,
+        runs_dir,
         episodes=args.budget,
         tasks={t: TASKS[t] for t in tasks},
         algos=algos,
@@ -63,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
         eval_episodes=args.eval_episodes,
     )
     jobs = args.jobs or os.cpu_count() or 1
-    print(f"reproduce: {len(runs)} runs of {args.budget} episodes on {jobs} processes ({args.backend}) -> {args.out}")
+    print(f"reproduce: {len(runs)} runs of {args.budget} episodes on {jobs} processes ({args.backend})")
+    print(f"reproduce: runs in {runs_dir}, the report in {args.out}")
     path, _ = reproduce(args.out, runs, jobs=jobs, backend=args.backend, command=args.command_line)
     print(path.read_text())
     return 0
