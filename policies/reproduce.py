@@ -10,11 +10,14 @@ success rate (mean over seeds, 95 % t-interval) beside the paper's per cell, the
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import functools
 import json
 import math
 import multiprocessing
+import os
+import platform
 import subprocess
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -24,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 from matplotlib.figure import Figure
 
 from policies.config import ALGORITHMS, TrainConfig
@@ -42,12 +46,14 @@ __all__ = [
     "OUTCOME_FILE",
     "PAPER_TABLE1",
     "PAPER_TABLE2",
+    "START_FILE",
     "TASKS",
     "Cell",
     "Run",
     "RunOutcome",
     "cells",
     "code_identity",
+    "machine",
     "plan",
     "plot_cells",
     "plot_curves",
@@ -102,6 +108,7 @@ class RunOutcome:
     steps_per_second: float = float("nan")
     resumed_from: int = 0
     code: dict[str, Any] = field(default_factory=dict)
+    machine: dict[str, Any] = field(default_factory=dict)
 
 
 def plan(
@@ -136,6 +143,8 @@ def plan(
 
 #: Written in a run's folder when it finishes: what it scored, how long it took, on which code.
 OUTCOME_FILE = "outcome.json"
+#: Written in a run's folder when it first starts: the code it began on (a resumed run may end on other code).
+START_FILE = "started_on.json"
 
 
 def _execute(run: Run) -> RunOutcome:
@@ -144,6 +153,12 @@ def _execute(run: Run) -> RunOutcome:
     if finished is not None:
         return finished
     start = time.perf_counter()
+    code = code_identity()
+    started = run.out_dir / START_FILE  # the code the run began on, kept across resumptions
+    if not started.exists():
+        run.out_dir.mkdir(parents=True, exist_ok=True)
+        write_strict_json(started, code, indent=1)
+    began_on = json.loads(started.read_text())
     config = TrainConfig(algo=run.algo, **dict(run.overrides))
     spec = RunSpec(
         run.task_id, seed=run.seed, episodes=run.episodes, demos=run.demos if run.algo != "ddpg" else 0,
@@ -155,10 +170,12 @@ def _execute(run: Run) -> RunOutcome:
     result = train(spec, config)
     curve = _read_curve(run.out_dir / "eval.csv")
     success = curve[-1][1] if curve else result.final_success
-    code = code_identity()
+    if began_on.get("trees") != code.get("trees"):
+        code["began_on_other_code"] = began_on.get("commit", "unknown")
     outcome = RunOutcome(
-        run, success, curve, time.perf_counter() - start, result.learning_steps_per_second, result.resumed_from, code
-    )
+        run, success, curve, time.perf_counter() - start, result.learning_steps_per_second, result.resumed_from, code,
+        machine(),
+    )  # fmt: skip
     record = {
         "episodes": run.episodes,
         "success": success,
@@ -168,6 +185,7 @@ def _execute(run: Run) -> RunOutcome:
         "resumed_from": outcome.resumed_from,
         "commit": code.get("commit", ""),
         "code": code,
+        "machine": machine(),
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
     write_strict_json(run.out_dir / OUTCOME_FILE, record, indent=1)
@@ -184,7 +202,7 @@ def _read_outcome(run: Run) -> RunOutcome | None:
     curve = [(int(e), float(s)) for e, s in record["curve"]]
     return RunOutcome(
         run, float(record["success"]), curve, float(record["wall_seconds"]), float(record["steps_per_second"]),
-        int(record.get("resumed_from", 0)), dict(record.get("code", {})),
+        int(record.get("resumed_from", 0)), dict(record.get("code", {})), dict(record.get("machine", {})),
     )  # fmt: skip
 
 
@@ -201,6 +219,16 @@ def _git(*args: str) -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() if out.returncode == 0 else None
+
+
+def machine() -> dict[str, Any]:
+    """What a run's wall time was measured on: the CPU model, its logical cores, Python and torch."""
+    cpu = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        names = [line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                 if line.startswith("model name")]  # fmt: skip
+        cpu = names[0] if names else cpu
+    return {"cpu": cpu, "cpus": os.cpu_count(), "python": platform.python_version(), "torch": torch.__version__}
 
 
 def code_identity() -> dict[str, Any]:
@@ -463,6 +491,9 @@ def _code_summary(outcomes: Sequence[RunOutcome]) -> tuple[dict[str, Any] | None
     """The code every run trained on (None if they differ or it is unknown) and a line that says so."""
     versions = {json.dumps(o.code.get("trees"), sort_keys=True) for o in outcomes}
     dirs = ", ".join(CODE_DIRS)
+    resumed = [o.run.out_dir.name for o in outcomes if "began_on_other_code" in o.code]
+    if resumed:
+        return None, f"runs resumed on other code than they began on: {', '.join(resumed)}"
     if not outcomes or any(not o.code or o.code.get("uncommitted_changes") for o in outcomes):
         return None, f"unknown for some runs: not in a git checkout, or {dirs} had uncommitted changes"
     if len(versions) > 1:
@@ -502,6 +533,7 @@ def _run_record(o: RunOutcome) -> dict[str, Any]:
         "resumed_from_episode": o.resumed_from,
         "curve": [{"episode": e, "success_pct": 100 * v} for e, v in o.curve],
         "code": o.code,
+        "machine": o.machine,
     }
 
 
@@ -531,6 +563,7 @@ def reproduce(
             "episodes_per_run": episodes,
             "eval_every": max((r.eval_every for r in runs), default=0),
             "eval_episodes": max((r.eval_episodes for r in runs), default=0),
+            "machines": _machines(outcomes),
             "processes": jobs,
             "backend": backend,
             "cells": [_cell_record(c) for c in found],
@@ -545,6 +578,7 @@ def reproduce(
         [
             ("runs", f"{len(runs)} of {episodes} training episodes each, seeds {_seeds(runs)}"),
             ("processes", f"{jobs} in parallel ({backend})"),
+            ("machine", "; ".join(_machine_line(m) for m in _machines(outcomes)) or "unknown"),
             ("wall time", f"{wall:.0f} s in this sitting (runs finished earlier are read with their own times)"),
             ("package", f"tissue-retract {__version__}"),
             ("code", code_line),
@@ -596,6 +630,19 @@ def reproduce(
     )
     path = page.write(out_dir, stem="results")["report_md"]
     return path, outcomes
+
+
+def _machines(outcomes: Sequence[RunOutcome]) -> list[dict[str, Any]]:
+    """The distinct machines the runs were measured on."""
+    found: dict[str, dict[str, Any]] = {}
+    for o in outcomes:
+        if o.machine:
+            found.setdefault(json.dumps(o.machine, sort_keys=True), o.machine)
+    return list(found.values())
+
+
+def _machine_line(m: dict[str, Any]) -> str:
+    return f"{m.get('cpu')}, {m.get('cpus')} logical cores, Python {m.get('python')}, torch {m.get('torch')}"
 
 
 def _seeds(runs: Sequence[Run]) -> str:

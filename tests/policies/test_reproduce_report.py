@@ -3,11 +3,22 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import matplotlib.image
 
-from policies.reproduce import CODE_DIRS, PAPER_TABLE1, Run, RunOutcome, cells, code_identity, plan, reproduce
+from policies.reproduce import (
+    CODE_DIRS,
+    PAPER_TABLE1,
+    START_FILE,
+    Run,
+    RunOutcome,
+    cells,
+    code_identity,
+    plan,
+    reproduce,
+)
 from policies.toy_env import TOY_TASK_ID
 from tests.chromium import RAW_REPR, render
 from tests.policies.test_reproduce import TINY
@@ -48,6 +59,22 @@ def test_runs_on_different_code_are_named_on_the_page(tmp_path: Path) -> None:
     assert "runs trained on 2 different versions of psm_control, safety, sim, policies" in path.read_text()
 
 
+def test_a_run_resumed_on_other_code_says_so(tmp_path: Path) -> None:
+    """A run that began on other code than it finished on is named, and results.json names no single code."""
+    runs = plan(
+        tmp_path / "runs", episodes=2, tasks={"toy": TOY_TASK_ID}, algos=("ddpg",), seeds=(1,), demos=0,
+        eval_every=1, eval_episodes=1, overrides=TINY,
+    )  # fmt: skip
+    runs[0].out_dir.mkdir(parents=True)
+    began = {"commit": "0000000", "trees": dict.fromkeys(CODE_DIRS, "f" * 40), "uncommitted_changes": False}
+    (runs[0].out_dir / START_FILE).write_text(json.dumps(began))
+    path, outcomes = reproduce(tmp_path, runs, jobs=1)
+    assert outcomes[0].code["began_on_other_code"] == "0000000"
+    assert json.loads((tmp_path / "results.json").read_text())["code"] is None
+    text = path.read_text()
+    assert "runs resumed on other code than they began on: toy-ddpg-d0-s1" in text
+
+
 def test_results_json_and_the_page(tmp_path: Path) -> None:
     """results.json holds every cell beside the paper and every run's curve and code; the page renders in
     headless Chromium with both figures, rounded numbers and no raw values."""
@@ -71,6 +98,7 @@ def test_results_json_and_the_page(tmp_path: Path) -> None:
     assert len(results["runs"]) == 4
     assert all([p["episode"] for p in r["curve"]] == [1, 2] for r in results["runs"])
     assert all(r["wall_seconds"] > 0 and r["episodes"] == 2 for r in results["runs"])
+    assert [m["cpus"] for m in results["machines"]] == [os.cpu_count()]
 
     screenshot = tmp_path / "page.png"
     text, layout = render(tmp_path / "results.html", screenshot)
