@@ -35,6 +35,7 @@ TOY_TRAIN = ("train", "--task", TOY_TASK_ID, "--algo", "ddpgbc", "--demos", "2",
 TOY_TRAIN_TAIL = ("--eval-episodes", "1", "--no-progress", "--no-tensorboard", "--set", "hidden_sizes=[8]")
 EVALUATE = ("evaluate", "--task", "lift", "--episodes", "1", "--seeds", "1")
 SWEEP = ("--task", "lift", "--jobs", "1", "--no-progress")
+REPRODUCE = ("reproduce", "--budget", "1", "--tasks", "I", "--algos", "ddpg", "--seeds", "1", "--out")
 
 
 @dataclass
@@ -156,6 +157,19 @@ def _cases(tmp: Path) -> list[Case]:
     # Command values.
     cases += [
         Case("seeds-negative", (*EVALUATE[:5], "--policy", "scripted", "--seeds", "-5"), ("--seeds", "-5", "[0,")),
+        Case(
+            "reproduce-budget-zero",
+            (*REPRODUCE, str(out / "r"), "--budget", "0"),
+            ("--budget", "0", "[1,"),
+            (out / "r",),
+        ),
+        Case("reproduce-jobs-zero", (*REPRODUCE, str(out / "r"), "--jobs", "0"), ("--jobs", "0", "[1,"), (out / "r",)),
+        Case("reproduce-seed-negative", (*REPRODUCE, str(out / "r"), "--seeds", "-1"), ("--seeds", "-1", "[0,")),
+        Case("reproduce-eval-every-zero", (*REPRODUCE, str(out / "r"), "--eval-every", "0"), ("--eval-every", "[1,")),
+        Case(
+            "reproduce-no-tasks", (*REPRODUCE, str(out / "r"), "--tasks", ","), ("--tasks", "I, II, III"), (out / "r",)
+        ),
+        Case("reproduce-out-a-file", (*REPRODUCE, str(_write(tmp / "r.txt", "x"))), ("--out", "a folder")),
         Case("episodes-zero", ("evaluate", "--policy", "scripted", "--episodes", "0"), ("--episodes", "0", "[1,")),
         Case(
             "seed-negative",
@@ -455,6 +469,7 @@ def _run(case: Case) -> Case:
 GROUPS = {
     "configs": ("config-",),
     "command-values": ("seeds-", "seed-", "episodes-", "deploy-", "trials-", "tune-", "json-", "record-", "jobs-"),
+    "reproduce": ("reproduce-",),
     "demonstrations": ("demos-", "train-"),
     "checkpoints-and-policies": ("checkpoint-", "policy-"),
     "sites": ("site-", "goal-", "registration-", "blind-", "register-"),

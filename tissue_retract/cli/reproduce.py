@@ -17,16 +17,20 @@ from pathlib import Path
 
 from policies.config import ALGORITHMS
 from policies.reproduce import TASKS, plan, reproduce
-from psm_control.errors import UnknownVariantError
+from psm_control.errors import ConfigurationError, UnknownVariantError
 from sim.sweep import BACKENDS
+from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, int_in
 
 __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
-    parser.add_argument("--budget", type=int, default=1000, help="training episodes per run (default 1000)")
-    parser.add_argument("--jobs", type=int, default=None, help="parallel training processes (default: all cores)")
+    episodes = int_in(1, MAX_EPISODES)
+    parser.add_argument("--budget", type=episodes, default=1000, help="training episodes per run (default 1000)")
+    parser.add_argument(
+        "--jobs", type=int_in(1, 4096), default=None, help="parallel training processes (default: all cores)"
+    )
     parser.add_argument(
         "--backend",
         choices=BACKENDS,
@@ -37,30 +41,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", type=Path, default=None, help="the training runs' folders (default: OUT/runs)")
     parser.add_argument("--tasks", default="I,II,III", help="comma-separated tasks among I, II, III")
     parser.add_argument("--algos", default=",".join(ALGORITHMS), help="comma-separated algorithms")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="seeds (default 1 2 3)")
-    parser.add_argument("--demos", type=int, default=100, help="demonstrations of Table 1 (default 100)")
+    parser.add_argument("--seeds", type=int_in(0, MAX_SEED), nargs="+", default=[1, 2, 3], help="seeds (default 1 2 3)")
+    parser.add_argument(
+        "--demos", type=int_in(1, MAX_EPISODES), default=100, help="demonstrations of Table 1 (default 100)"
+    )
     parser.add_argument("--no-ablation", action="store_true", help="skip Table 2's 25 and 50 demonstrations")
-    parser.add_argument("--eval-every", type=int, default=50, help="episodes between evaluations (default 50)")
-    parser.add_argument("--eval-episodes", type=int, default=50, help="episodes per evaluation (default 50)")
+    parser.add_argument("--eval-every", type=episodes, default=50, help="episodes between evaluations (default 50)")
+    parser.add_argument("--eval-episodes", type=episodes, default=50, help="episodes per evaluation (default 50)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Plan the runs, train them in parallel, write the tables and curves."""
-    tasks = [t.strip().upper() for t in args.tasks.split(",") if t.strip()]
+    tasks = list(dict.fromkeys(t.strip().upper() for t in args.tasks.split(",") if t.strip()))
     for task in tasks:
         if task not in TASKS:
             raise UnknownVariantError("tasks", task, TASKS)
-    algos = [a.strip().lower() for a in args.algos.split(",") if a.strip()]
+    algos = list(dict.fromkeys(a.strip().lower() for a in args.algos.split(",") if a.strip()))
     for algo in algos:
         if algo not in ALGORITHMS:
             raise UnknownVariantError("algos", algo, ALGORITHMS)
+    if not tasks or not algos:
+        flag, allowed = ("--tasks", ", ".join(TASKS)) if not tasks else ("--algos", ", ".join(ALGORITHMS))
+        raise ConfigurationError(flag, args.tasks if not tasks else args.algos, f"one or more of {allowed}")
+    seeds = list(dict.fromkeys(args.seeds))  # one folder per seed: a repeated seed would train it twice at once
     runs_dir = args.runs if args.runs is not None else args.out / "runs"
+    check_out_folder(args.out, (), ())
+    if runs_dir.exists() and not runs_dir.is_dir():
+        raise ConfigurationError("--runs", str(runs_dir), "a folder (this is a file)")
     runs = plan(
         runs_dir,
         episodes=args.budget,
         tasks={t: TASKS[t] for t in tasks},
         algos=algos,
-        seeds=args.seeds,
+        seeds=seeds,
         demos=args.demos,
         ablation_task=None if args.no_ablation else "III",
         eval_every=min(args.eval_every, args.budget),
