@@ -169,6 +169,11 @@ def _cases(tmp: Path) -> list[Case]:
         Case(
             "reproduce-no-tasks", (*REPRODUCE, str(out / "r"), "--tasks", ","), ("--tasks", "I, II, III"), (out / "r",)
         ),
+        Case("bench-chain-seed-negative", ("bench", "chain", "--seed", "-1"), ("--seed", "-1", "[0,")),
+        Case("bench-chain-few-ticks", ("bench", "chain", "--ticks", "5"), ("--ticks", "5", "[100,")),
+        Case("bench-chain-no-repeats", ("bench", "chain", "--repeats", "0"), ("--repeats", "0", "[1,")),
+        Case("bench-env-negative-steps", ("bench", "env", "--steps", "-3"), ("--steps", "-3", "[1,")),
+        Case("simdvrk-seed-negative", ("sim-dvrk", "--seed", "-1"), ("--seed", "-1", "[0,")),
         Case("reproduce-out-a-file", (*REPRODUCE, str(_write(tmp / "r.txt", "x"))), ("--out", "a folder")),
         Case("episodes-zero", ("evaluate", "--policy", "scripted", "--episodes", "0"), ("--episodes", "0", "[1,")),
         Case(
@@ -469,7 +474,7 @@ def _run(case: Case) -> Case:
 GROUPS = {
     "configs": ("config-",),
     "command-values": ("seeds-", "seed-", "episodes-", "deploy-", "trials-", "tune-", "json-", "record-", "jobs-"),
-    "reproduce": ("reproduce-",),
+    "reproduce-bench-simdvrk": ("reproduce-", "bench-", "simdvrk-"),
     "demonstrations": ("demos-", "train-"),
     "checkpoints-and-policies": ("checkpoint-", "policy-"),
     "sites": ("site-", "goal-", "registration-", "blind-", "register-"),

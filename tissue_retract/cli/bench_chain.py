@@ -37,6 +37,7 @@ from safety.chain import ControlChain
 from safety.config import SafetyConfig
 from safety.filter import KKT_TOLERANCE, SolvePaths
 from sim.strict_json import write_strict_json
+from tissue_retract.cli._checks import int_in
 
 __all__ = ["add_arguments", "run"]
 
@@ -46,14 +47,16 @@ _FORCE_PERIOD_S = 0.05  # the tissue force is re-measured at the same rate
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the target's options."""
-    parser.add_argument("--ticks", type=int, default=10_000, help="ticks per chain (default: 10000, minimum 100)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the input sequence")
+    parser.add_argument(
+        "--ticks", type=int_in(100, 10_000_000), default=10_000, help="ticks per chain, at least 100 (default: 10000)"
+    )
+    parser.add_argument("--seed", type=int_in(0, 2**32 - 1), default=0, help="seed of the input sequence")
     parser.add_argument(
         "--rate", type=float, default=1000.0, help="control rate [Hz] (default: 1000, the loop the target is for)"
     )
     parser.add_argument(
         "--repeats",
-        type=int,
+        type=int_in(1, 1000),
         default=1,
         help="runs of the fast chain on the same input; with more than one, each tick's least CPU time over "
         "them is reported too (default: 1)",
@@ -97,9 +100,9 @@ def _run(naive: bool, ticks: int, seed: int, rate_hz: float = 1000.0) -> tuple[n
 
 def run(args: argparse.Namespace) -> int:
     """Run both chains and print p50/p99/max [us]."""
-    ticks = max(int(args.ticks), 100)
+    ticks = args.ticks
     fast, fast_cpu, fast_stops, fast_paths = _run(False, ticks, args.seed, args.rate)
-    repeats = max(1, int(args.repeats))
+    repeats = args.repeats
     least_cpu = fast_cpu.copy()
     for _ in range(repeats - 1):
         np.minimum(least_cpu, _run(False, ticks, args.seed, args.rate)[1], out=least_cpu)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from sim.envs import make
 from sim.strict_json import write_strict_json
+from tissue_retract.cli._checks import MAX_EPISODES, int_in
 
 __all__ = ["add_arguments", "run"]
 
@@ -21,8 +22,9 @@ __all__ = ["add_arguments", "run"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the target's options."""
     parser.add_argument("--task", default="multisite", help="task (default: multisite)")
-    parser.add_argument("--steps", type=int, default=1000, help="state-only steps (default: 1000)")
-    parser.add_argument("--render-steps", type=int, default=100, help="steps with rendering (default: 100)")
+    steps = int_in(1, MAX_EPISODES * 50)
+    parser.add_argument("--steps", type=steps, default=1000, help="state-only steps (default: 1000)")
+    parser.add_argument("--render-steps", type=steps, default=100, help="steps with rendering (default: 100)")
 
 
 def _rate(env: object, steps: int, render: bool) -> tuple[float, float, int]:

@@ -46,7 +46,7 @@ from sim.force_sensing import SENSING_NAMES, ForceSensor, sensing_params
 from sim.scene3d import PsmScene
 from sim.scene_stream import LiveScene, SceneStream
 from tissue_retract.cli._camera import add_texture_argument, check_texture
-from tissue_retract.cli._checks import float_in
+from tissue_retract.cli._checks import MAX_EPISODES, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
@@ -58,7 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--task", default=None, metavar="ID", help="serve a task's tissue scene (force on body/measured_cf)"
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the task scene's first episode (default: 0)")
+    parser.add_argument(
+        "--seed",
+        type=int_in(0, 2**31 - 1 - MAX_EPISODES),
+        default=0,
+        help="seed of the task scene's first episode (default: 0)",
+    )
     parser.add_argument("--rate", type=float, default=100.0, help="publishing rate [Hz] (default: 100, the dVRK's)")
     parser.add_argument(
         "--domain-id", type=int, default=environment_domain_id(), help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID or 0)"
