@@ -174,6 +174,9 @@ def _cases(tmp: Path) -> list[Case]:
         Case("bench-chain-no-repeats", ("bench", "chain", "--repeats", "0"), ("--repeats", "0", "[1,")),
         Case("bench-env-negative-steps", ("bench", "env", "--steps", "-3"), ("--steps", "-3", "[1,")),
         Case("simdvrk-seed-negative", ("sim-dvrk", "--seed", "-1"), ("--seed", "-1", "[0,")),
+        Case("simdvrk-base-nan", ("sim-dvrk", "--base-xyz", "nan", "0", "0"), ("--base-xyz", "nan", "[-5, 5]")),
+        Case("bench-ros-negative-rate", ("bench", "ros", "--rates", "-5"), ("--rates", "-5", "[1, 5000]")),
+        Case("bench-ros-nan-duration", ("bench", "ros", "--duration", "nan"), ("--duration", "nan", "[0.1,")),
         Case("reproduce-out-a-file", (*REPRODUCE, str(_write(tmp / "r.txt", "x"))), ("--out", "a folder")),
         Case("episodes-zero", ("evaluate", "--policy", "scripted", "--episodes", "0"), ("--episodes", "0", "[1,")),
         Case(

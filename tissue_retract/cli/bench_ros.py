@@ -23,6 +23,7 @@ from hardware_if.network import apply_local_ros_env, run_domain_id
 from hardware_if.session import ros_session
 from psm_control.commands import JointCommand
 from sim.strict_json import write_strict_json
+from tissue_retract.cli._checks import float_in
 
 __all__ = ["add_arguments", "run"]
 
@@ -33,9 +34,11 @@ _ROLL_STEP = 1e-4
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the ros target."""
     parser.add_argument(
-        "--rates", type=float, nargs="+", default=[100.0, 1000.0], help="rates [Hz] (default: 100 1000)"
+        "--rates", type=float_in(1.0, 5000.0), nargs="+", default=[100.0, 1000.0], help="rates [Hz] (default: 100 1000)"
     )
-    parser.add_argument("--duration", type=float, default=5.0, help="streaming time per rate [s] (default: 5)")
+    parser.add_argument(
+        "--duration", type=float_in(0.1, 3600.0), default=5.0, help="streaming time per rate [s] (default: 5)"
+    )
 
 
 def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str, Any]:
