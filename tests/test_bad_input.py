@@ -169,6 +169,12 @@ def _cases(tmp: Path) -> list[Case]:
         Case(
             "reproduce-no-tasks", (*REPRODUCE, str(out / "r"), "--tasks", ","), ("--tasks", "I, II, III"), (out / "r",)
         ),
+        Case(
+            "bench-safety-json-unwritable",
+            ("bench", "safety", "--json", str(_write(tmp / "a-file", "x") / "safety.json")),
+            ("--json", "a path whose folder can be created"),
+        ),
+        Case("bench-train-json-folder", ("bench", "train", "--json", str(tmp)), ("--json", "not a folder")),
         Case("bench-chain-seed-negative", ("bench", "chain", "--seed", "-1"), ("--seed", "-1", "[0,")),
         Case("bench-chain-few-ticks", ("bench", "chain", "--ticks", "5"), ("--ticks", "5", "[100,")),
         Case("bench-chain-no-repeats", ("bench", "chain", "--repeats", "0"), ("--repeats", "0", "[1,")),

@@ -12,8 +12,9 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from psm_control.errors import ConfigurationError
+from psm_control.inputs import check_output_path
 
-__all__ = ["MAX_EPISODES", "MAX_SEED", "MAX_TRIALS", "check_out_folder", "float_in", "int_in"]
+__all__ = ["MAX_EPISODES", "MAX_SEED", "MAX_TRIALS", "check_out_folder", "float_in", "int_in", "output_file"]
 
 #: Largest episode seed: environment seeds are ``seed * 100000 + i`` and must stay below 2**32.
 MAX_SEED = 40_000
@@ -53,6 +54,19 @@ def float_in(low: float, high: float, *, open_low: bool = False) -> Callable[[st
         if not inside:
             raise argparse.ArgumentTypeError(f"{text} is not allowed: expected a finite number in {interval}")
         return value
+
+    return parse
+
+
+def output_file(field: str) -> Callable[[str], Path]:
+    """An argparse type: a file the command writes when it is done, checked before it starts, so that a path
+    it cannot write does not lose the work (:func:`psm_control.inputs.check_output_path`)."""
+
+    def parse(text: str) -> Path:
+        try:
+            return check_output_path(text, field)
+        except ConfigurationError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
 
     return parse
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from tissue_retract.cli._checks import output_file
+
 __all__ = ["COMMANDS", "TARGETS", "add_common_arguments", "module_name"]
 
 #: Benchmark targets and their one-line help.
@@ -31,4 +33,6 @@ def module_name(target: str) -> str:
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     """The options every target takes."""
-    parser.add_argument("--json", metavar="FILE", default=None, help="also write the results as JSON")
+    parser.add_argument(
+        "--json", metavar="FILE", type=output_file("--json"), default=None, help="also write the results as JSON"
+    )
