@@ -243,6 +243,12 @@ def _cases(tmp: Path) -> list[Case]:
             (tmp / "o3",),
         ),
         Case(
+            "tune-grid-list",
+            ("tune-safety", "--policy", "scripted", *SWEEP, "--out", str(tmp / "o5"), "--grid", "force_limit_n=1,2"),
+            ("--grid", "'2'", "NAME=LOW:HIGH"),
+            (tmp / "o5",),
+        ),
+        Case(
             "tune-grid-huge",
             (
                 "tune-safety",

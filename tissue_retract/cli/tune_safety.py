@@ -128,7 +128,10 @@ def _nothing_recommended(results: list[SettingResult], bound: float, base: dict[
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write the table, plot and recommended configuration."""
     task_id = gym_id(args.task)
-    ranges = parse_ranges(args.grid, valid_names=tunable_fields())
+    try:
+        ranges = parse_ranges(args.grid, valid_names=tunable_fields())
+    except ConfigurationError as e:  # the range grammar is robustness's --vary; here the option is --grid
+        raise ConfigurationError(e.field.replace("vary", "--grid", 1), e.value, e.allowed) from None
     count = args.levels ** len(ranges) * args.episodes
     if count > MAX_TRIALS:
         raise ConfigurationError(
