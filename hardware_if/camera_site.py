@@ -31,9 +31,8 @@ import sim.envs
 from hardware_if.crtk import periodic_qos
 from hardware_if.endoscope_stream import DEFAULT_RIG, camera_topics
 from hardware_if.errors import HoldError
-from hardware_if.executor import make_executor
 from hardware_if.psm_client import PsmClient
-from hardware_if.session import close_spun_node
+from hardware_if.session import SpinThread
 from hardware_if.task_estimate import TaskEstimate
 from sim.endoscope import StereoFrame, look_at
 from sim.tissue import SITE_NAMES
@@ -102,19 +101,7 @@ class CameraSite(Node):
         for side in ("left", "right"):
             self.create_subscription(Image, topics[f"{side}_image"], self._on_image(side), qos)
             self.create_subscription(CameraInfo, topics[f"{side}_info"], self._on_info(side), qos)
-        self._executor = make_executor(self.context)
-        self._executor.add_node(self)
-        self._running = True
-        self._thread = threading.Thread(target=self._spin, name=f"{rig}-images", daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while self._running and self.context.ok():
-            try:
-                self._executor.spin_once(timeout_sec=0.05)
-            except Exception:  # shutting down
-                if not self.context.ok():
-                    break
+        self._spinner = SpinThread(self, f"{rig}-images")
 
     def _on_image(self, side: str) -> Any:
         def callback(message: Image) -> None:
@@ -211,5 +198,4 @@ class CameraSite(Node):
 
     def close(self) -> None:
         """Stop spinning and destroy the node."""
-        self._running = False
-        close_spun_node(self, self._thread, self._executor)
+        self._spinner.close()

@@ -14,7 +14,6 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from crtk_msgs.msg import OperatingState, StringStamped  # type: ignore[import-untyped]
@@ -30,8 +29,7 @@ from hardware_if.commander_watch import NAME_WAIT_S, UNNAMED, WATCH_PERIOD_S, Co
 from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
-from hardware_if.executor import make_executor
-from hardware_if.session import close_spun_node
+from hardware_if.session import SpinThread, close_spun_node
 from hardware_if.task_estimate import JawReading
 from hardware_if.wrench_calibration import WrenchCalibration
 from psm_control.commands import JointCommand, MeasuredState
@@ -116,9 +114,7 @@ class PsmClient(Node):
         self._commanding = False
         self._hold_q: np.ndarray | None = None
         self._errors: list[str] = []
-        self._executor: Any = None
-        self._thread: threading.Thread | None = None
-        self._running = False
+        self._spinner: SpinThread | None = None
 
         state, event = periodic_qos(), event_qos()
         t = self.topics.topic
@@ -147,29 +143,16 @@ class PsmClient(Node):
     # -- lifetime ---------------------------------------------------------------------------------
     def start(self) -> PsmClient:
         """Spin the node on a background thread."""
-        if self._thread is None:
-            self._executor = make_executor(self.context)
-            self._executor.add_node(self)
-            self._running = True
-            self._thread = threading.Thread(target=self._spin, name=f"{self.topics.arm}-client", daemon=True)
-            self._thread.start()
+        if self._spinner is None:
+            self._spinner = SpinThread(self, f"{self.topics.arm}-client")
         return self
-
-    def _spin(self) -> None:
-        executor = self._executor
-        while self._running and executor is not None and self.context.ok():
-            try:
-                executor.spin_once(timeout_sec=0.05)
-            except Exception as e:  # a shut-down context ends the loop; anything else is logged, not fatal
-                if not self.context.ok():
-                    break
-                self.get_logger().error(f"callback failed: {e!r}")
 
     def close(self) -> None:
         """Stop spinning and destroy the node (safe to call twice)."""
-        self._running = False
-        if close_spun_node(self, self._thread, self._executor):
-            self._thread = self._executor = None
+        if self._spinner is None:
+            close_spun_node(self, None, None)
+        elif self._spinner.close():
+            self._spinner = None
 
     def __enter__(self) -> PsmClient:
         return self.start()

@@ -29,10 +29,9 @@ from std_msgs.msg import Bool, Int64  # type: ignore[import-untyped]
 import sim.envs
 from hardware_if.crtk import periodic_qos
 from hardware_if.errors import DvrkTimeoutError
-from hardware_if.executor import make_executor
 from hardware_if.psm_client import PsmClient
 from hardware_if.registration import console_base_frame, grasp_point
-from hardware_if.session import close_spun_node
+from hardware_if.session import SpinThread
 from hardware_if.sim_task import task_topic
 from hardware_if.task_estimate import TaskEstimate
 from psm_control.quaternion import quaternion_xyzw
@@ -66,19 +65,7 @@ class TaskListener(Node):
         self._resets_rx_s = float("-inf")
         self.create_subscription(Int64, task_topic(arm, "resets"), self._on_resets, qos)
         self._reset = None if listen_only else self.create_publisher(Int64, task_topic(arm, "reset"), qos)
-        self._executor = make_executor(self.context)
-        self._executor.add_node(self)
-        self._running = True
-        self._thread = threading.Thread(target=self._spin, name=f"{arm}-task", daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while self._running and self.context.ok():
-            try:
-                self._executor.spin_once(timeout_sec=0.05)
-            except Exception:  # shutting down
-                if not self.context.ok():
-                    break
+        self._spinner = SpinThread(self, f"{arm}-task")
 
     def _point_callback(self, name: str) -> Any:
         def callback(message: PointStamped) -> None:
@@ -169,8 +156,7 @@ class TaskListener(Node):
 
     def close(self) -> None:
         """Stop spinning and destroy the node."""
-        self._running = False
-        close_spun_node(self, self._thread, self._executor)
+        self._spinner.close()
 
     def __enter__(self) -> TaskListener:
         return self

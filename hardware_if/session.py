@@ -12,8 +12,16 @@ from contextlib import contextmanager
 from typing import Any
 
 from hardware_if.errors import RosNotAvailableError
+from hardware_if.executor import make_executor
 
-__all__ = ["SPIN_JOIN_TIMEOUT_S", "close_spun_node", "require_ros", "ros_session", "stop_spin_thread"]
+__all__ = [
+    "SPIN_JOIN_TIMEOUT_S",
+    "SpinThread",
+    "close_spun_node",
+    "require_ros",
+    "ros_session",
+    "stop_spin_thread",
+]
 
 #: How long closing a node waits for its spin thread to leave ``spin_once`` (which waits 0.05 s at most).
 SPIN_JOIN_TIMEOUT_S = 5.0
@@ -90,3 +98,43 @@ def close_spun_node(node: Any, thread: threading.Thread | None, executor: Any) -
         return False
     node.destroy_node()
     return True
+
+
+class SpinThread:
+    """A node spun by an executor of its own on a daemon thread, until :meth:`close` destroys it.
+
+    The dVRK client, the task listener and the camera's image node each spin this way, with
+    ``spin_once`` in a loop (:mod:`hardware_if.executor` says why not ``spin()``). A callback that raises
+    is logged and the loop goes on; a shut-down context ends it.
+
+    Args:
+        node: The rclpy node.
+        name: The thread's name, in logs and warnings (``PSM1-client``).
+    """
+
+    def __init__(self, node: Any, name: str) -> None:
+        self._node = node
+        self._executor = make_executor(node.context)
+        self._executor.add_node(node)
+        self._running = True
+        self._thread = threading.Thread(target=self._spin, name=name, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while self._running and self._node.context.ok():
+            try:
+                self._executor.spin_once(timeout_sec=0.05)
+            except Exception as e:  # a shut-down context ends the loop; anything else is logged, not fatal
+                if not self._node.context.ok():
+                    break
+                self._node.get_logger().error(f"callback failed: {e!r}")
+
+    @property
+    def thread(self) -> threading.Thread:
+        """The spinning thread."""
+        return self._thread
+
+    def close(self) -> bool:
+        """Stop spinning and destroy the node (:func:`close_spun_node`); False if it was left to the exit."""
+        self._running = False
+        return close_spun_node(self._node, self._thread, self._executor)

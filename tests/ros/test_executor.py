@@ -60,10 +60,10 @@ def test_client_closed_while_its_stream_runs_ends_cleanly() -> None:
         for k in range(5):
             client = PsmClient(arm, node_name=f"client_{k}_{time.monotonic_ns()}", context=context).start()
             client.wait_for_measurement(timeout_s=20.0)
-            spinner = client._thread
+            spinner = client._spinner
             client.close()
             client.close()  # a second close is a no-op
-            assert spinner is not None and not spinner.is_alive()
+            assert spinner is not None and not spinner.thread.is_alive()
     finally:
         stop.set()
         pourer.join()
