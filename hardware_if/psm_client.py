@@ -29,7 +29,7 @@ from hardware_if.commander_watch import NAME_WAIT_S, UNNAMED, WATCH_PERIOD_S, Co
 from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.errors import DvrkError, DvrkTimeoutError
-from hardware_if.session import SpinThread, close_spun_node
+from hardware_if.session import SpinThread
 from hardware_if.task_estimate import JawReading
 from hardware_if.wrench_calibration import WrenchCalibration
 from psm_control.commands import JointCommand, MeasuredState
@@ -149,8 +149,8 @@ class PsmClient(Node):
 
     def close(self) -> None:
         """Stop spinning and destroy the node (safe to call twice)."""
-        if self._spinner is None:
-            close_spun_node(self, None, None)
+        if self._spinner is None:  # never spun: nothing to stop first
+            self.destroy_node()
         elif self._spinner.close():
             self._spinner = None
 

@@ -183,6 +183,11 @@ def _cases(tmp: Path) -> list[Case]:
         Case("simdvrk-base-nan", ("sim-dvrk", "--base-xyz", "nan", "0", "0"), ("--base-xyz", "nan", "[-5, 5]")),
         Case("bench-ros-negative-rate", ("bench", "ros", "--rates", "-5"), ("--rates", "-5", "[1, 5000]")),
         Case("bench-ros-nan-duration", ("bench", "ros", "--duration", "nan"), ("--duration", "nan", "[0.1,")),
+        Case(
+            "reproduce-runs-a-file",
+            (*REPRODUCE, str(out / "r2"), "--runs", str(_write(tmp / "runs.txt", "x"))),
+            ("--runs", "a folder (this is a file)"),
+        ),
         Case("reproduce-out-a-file", (*REPRODUCE, str(_write(tmp / "r.txt", "x"))), ("--out", "a folder")),
         Case("episodes-zero", ("evaluate", "--policy", "scripted", "--episodes", "0"), ("--episodes", "0", "[1,")),
         Case(

@@ -71,26 +71,26 @@ def output_file(field: str) -> Callable[[str], Path]:
     return parse
 
 
-def check_out_folder(out: Path, outputs: Iterable[str], inputs: Iterable[str | Path | None]) -> None:
+def check_out_folder(
+    out: Path, outputs: Iterable[str], inputs: Iterable[str | Path | None], field: str = "--out"
+) -> None:
     """Make an output folder, refusing a file, an unwritable folder, or one where an output replaces an input.
 
     Raises:
-        ConfigurationError: Naming ``--out`` and what is wrong (the input it would overwrite).
+        ConfigurationError: Naming ``field`` (the option) and what is wrong (the input it would overwrite).
     """
     if out.exists() and not out.is_dir():
-        raise ConfigurationError("--out", str(out), "a folder (this is a file)")
+        raise ConfigurationError(field, str(out), "a folder (this is a file)")
     names = set(outputs)
     for given in inputs:
         if given is None or not Path(given).is_file():
             continue
         source = Path(given).resolve()
         if source.parent == out.resolve() and (source.name in names or source.suffix == ".png"):
-            raise ConfigurationError(
-                "--out", str(out), f"a folder whose outputs do not replace the input {str(given)!r}"
-            )
+            raise ConfigurationError(field, str(out), f"a folder whose outputs do not replace the input {str(given)!r}")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise ConfigurationError("--out", str(out), f"a folder that can be created ({e.strerror or e})") from e
+        raise ConfigurationError(field, str(out), f"a folder that can be created ({e.strerror or e})") from e
     if not os.access(out, os.W_OK):
-        raise ConfigurationError("--out", str(out), "a writable folder")
+        raise ConfigurationError(field, str(out), "a writable folder")

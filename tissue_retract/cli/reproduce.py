@@ -66,8 +66,7 @@ def run(args: argparse.Namespace) -> int:
     seeds = list(dict.fromkeys(args.seeds))  # one folder per seed: a repeated seed would train it twice at once
     runs_dir = args.runs if args.runs is not None else args.out / "runs"
     check_out_folder(args.out, (), ())
-    if runs_dir.exists() and not runs_dir.is_dir():
-        raise ConfigurationError("--runs", str(runs_dir), "a folder (this is a file)")
+    check_out_folder(runs_dir, (), (), field="--runs")
     runs = plan(
         runs_dir,
         episodes=args.budget,
