@@ -21,7 +21,7 @@ import platform
 import subprocess
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -183,9 +183,8 @@ def _execute(run: Run) -> RunOutcome:
         "wall_seconds": outcome.wall_seconds,
         "steps_per_second": outcome.steps_per_second,
         "resumed_from": outcome.resumed_from,
-        "commit": code.get("commit", ""),
         "code": code,
-        "machine": machine(),
+        "machine": outcome.machine,
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
     write_strict_json(run.out_dir / OUTCOME_FILE, record, indent=1)
@@ -253,7 +252,12 @@ def _read_curve(path: Path) -> list[tuple[int, float]]:
         return [(int(row["episode"]), float(row["success_rate"])) for row in csv.DictReader(f)]
 
 
-def run_all(runs: Iterable[Run], jobs: int = 1, backend: str = "local") -> list[RunOutcome]:
+def run_all(
+    runs: Iterable[Run],
+    jobs: int = 1,
+    backend: str = "local",
+    on_finished: Callable[[RunOutcome], None] | None = None,
+) -> list[RunOutcome]:
     """Train every run, ``jobs`` processes at a time (each process uses one torch thread).
 
     Args:
@@ -261,6 +265,7 @@ def run_all(runs: Iterable[Run], jobs: int = 1, backend: str = "local") -> list[
         jobs: Parallel runs on the local pool, or CPUs of a local Ray cluster started here.
         backend: ``"local"`` (a process pool) or ``"ray"`` (``RAY_ADDRESS`` or a local cluster on
             127.0.0.1). On a cluster of several machines the output folder must be on storage they share.
+        on_finished: Called with each outcome as its run ends (or is read back), in the order they end.
 
     Raises:
         UnknownVariantError: Unknown backend.
@@ -275,9 +280,13 @@ def run_all(runs: Iterable[Run], jobs: int = 1, backend: str = "local") -> list[
     def collect(run: Run, result: Callable[[], RunOutcome]) -> None:
         # One failed run must not cost the others: hours of training may be under way beside it.
         try:
-            outcomes.append(result())
+            outcome = result()
         except Exception as e:
             failures.append((run.out_dir.name, f"{type(e).__name__}: {e}"))
+            return
+        outcomes.append(outcome)
+        if on_finished is not None:
+            on_finished(outcome)
 
     if backend == "ray":
         with ray_cluster(jobs) as ray:
@@ -291,10 +300,10 @@ def run_all(runs: Iterable[Run], jobs: int = 1, backend: str = "local") -> list[
             collect(run, functools.partial(_execute, run))
     else:
         with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(_execute, run) for run in runs]
+            futures = {pool.submit(_execute, run): run for run in runs}
             try:
-                for run, future in zip(runs, futures, strict=True):
-                    collect(run, future.result)
+                for future in as_completed(futures):
+                    collect(futures[future], future.result)
             except KeyboardInterrupt:  # finished runs are on disk; the running ones resume from their checkpoints
                 stop_pool(pool)
                 raise
@@ -392,9 +401,14 @@ def _ours(cell: Cell | None) -> str:
 
 
 def _paper(cell: Cell) -> str:
-    if cell.paper_mean_pct is None:
+    return _paper_text(cell.paper_mean_pct, cell.paper_ci_pct if cell.table == 1 else None)
+
+
+def _paper_text(mean: float | None, ci: float | None) -> str:
+    """The paper's number as printed: its mean, with its interval where the paper gives one."""
+    if mean is None:
         return "-"
-    return f"{cell.paper_mean_pct:g}" + (f" +- {cell.paper_ci_pct:g}" if cell.table == 1 else "")
+    return f"{mean:g}" + ("" if ci is None else f" +- {ci:g}")
 
 
 def table_blocks(outcomes: Sequence[RunOutcome], demos: int = 100) -> list[tuple[str, list[str], list[list[str]]]]:
@@ -409,24 +423,26 @@ def table_blocks(outcomes: Sequence[RunOutcome], demos: int = 100) -> list[tuple
         return f"{_ours(cell)} / {paper}"
 
     rows = [
-        [task, *(paired(table1.get((task, a)), _paper_or_dash(PAPER_TABLE1.get(task, {}).get(a))) for a in algos)]
+        [
+            task,
+            *(
+                paired(table1.get((task, a)), _paper_text(*PAPER_TABLE1.get(task, {}).get(a, (None, None))))
+                for a in algos
+            ),
+        ]
         for task in tasks
     ]
     blocks = [(f"Table 1: success % ({demos} demonstrations; ours / paper)", ["Task", *algos], rows)]
     if table2:
         counts = sorted({n for _, n in table2})
         rows = [
-            [algo, *(paired(table2.get((algo, n)), f"{PAPER_TABLE2[algo].get(n, '-')}") for n in counts)]
+            [algo, *(paired(table2.get((algo, n)), _paper_text(PAPER_TABLE2[algo].get(n), None)) for n in counts)]
             for algo in algos
             if algo in PAPER_TABLE2
         ]
         heading = "Table 2: Task III success % by demonstrations (ours / paper)"
         blocks.append((heading, ["Algorithm", *(str(n) for n in counts)], rows))
     return blocks
-
-
-def _paper_or_dash(paper: tuple[float, float] | None) -> str:
-    return "-" if paper is None else f"{paper[0]:g} +- {paper[1]:g}"
 
 
 def plot_cells(found: Sequence[Cell], path: Path) -> Path:
@@ -538,21 +554,29 @@ def _run_record(o: RunOutcome) -> dict[str, Any]:
 
 
 def reproduce(
-    out_dir: Path, runs: Sequence[Run], jobs: int = 1, backend: str = "local", command: str = ""
+    out_dir: Path,
+    runs: Sequence[Run],
+    jobs: int = 1,
+    backend: str = "local",
+    command: str = "",
+    on_finished: Callable[[RunOutcome], None] | None = None,
 ) -> tuple[Path, list[RunOutcome]]:
     """Run the protocol (on ``backend``, as :func:`run_all`) and write the report into ``out_dir``:
     ``results.md`` and ``results.html`` (the same page), ``results.json`` (every number on it, every run's
     learning curve and the code it trained on), ``results-cells.png`` and ``results-curves.png``.
-    ``command`` is the command line shown on the page. Returns the Markdown's path."""
+    ``command`` is the command line shown on the page; ``on_finished`` is called as each run ends.
+    Returns the Markdown's path."""
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    outcomes = sorted(run_all(runs, jobs, backend), key=lambda o: (o.run.task, o.run.algo, o.run.demos, o.run.seed))
+    finished = run_all(runs, jobs, backend, on_finished)
+    outcomes = sorted(finished, key=lambda o: (o.run.task, o.run.algo, o.run.demos, o.run.seed))
     wall = time.perf_counter() - start
     demos = max((r.demos for r in runs), default=100)
     found = cells(outcomes, demos)
     code, code_line = _code_summary(outcomes)
     below = [c for c in found if c.meets_paper is False]
     episodes = max((r.episodes for r in runs), default=0)
+    machines = _machines(outcomes)
     write_strict_json(
         out_dir / "results.json",
         {
@@ -563,7 +587,7 @@ def reproduce(
             "episodes_per_run": episodes,
             "eval_every": max((r.eval_every for r in runs), default=0),
             "eval_episodes": max((r.eval_episodes for r in runs), default=0),
-            "machines": _machines(outcomes),
+            "machines": machines,
             "processes": jobs,
             "backend": backend,
             "cells": [_cell_record(c) for c in found],
@@ -576,9 +600,9 @@ def reproduce(
     page = Page("Reproduction of the seed paper's evaluation")
     page.card(
         [
-            ("runs", f"{len(runs)} of {episodes} training episodes each, seeds {_seeds(runs)}"),
+            ("runs", f"{len(runs)} runs of {episodes} training episodes each, seeds {_seeds(runs)}"),
             ("processes", f"{jobs} in parallel ({backend})"),
-            ("machine", "; ".join(_machine_line(m) for m in _machines(outcomes)) or "unknown"),
+            ("machine", "; ".join(_machine_line(m) for m in machines) or "unknown"),
             ("wall time", f"{wall:.0f} s in this sitting (runs finished earlier are read with their own times)"),
             ("package", f"tissue-retract {__version__}"),
             ("code", code_line),

@@ -43,8 +43,10 @@ def test_reproduce_smoke_on_the_toy_task(tmp_path: Path) -> None:
         tmp_path, episodes=2, tasks={"toy": TOY_TASK_ID}, algos=("ddpg", "ddpgbc"), seeds=(1, 2), demos=2,
         eval_every=1, eval_episodes=1, overrides=TINY,
     )  # fmt: skip
-    path, outcomes = reproduce(tmp_path, runs, jobs=2)
+    ended: list[RunOutcome] = []
+    path, outcomes = reproduce(tmp_path, runs, jobs=2, on_finished=ended.append)
     assert len(outcomes) == 4 and all(len(o.curve) == 2 for o in outcomes)
+    assert sorted(o.run.out_dir.name for o in ended) == sorted(r.out_dir.name for r in runs)  # each, as it ended
     text = path.read_text()
     assert "| toy |" in text and "Table 1" in text
     assert (tmp_path / "results-curves.png").stat().st_size > 1000

@@ -16,7 +16,7 @@ import os
 from pathlib import Path
 
 from policies.config import ALGORITHMS
-from policies.reproduce import TASKS, plan, reproduce
+from policies.reproduce import TASKS, RunOutcome, plan, reproduce
 from psm_control.errors import ConfigurationError, UnknownVariantError
 from sim.sweep import BACKENDS
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, int_in
@@ -81,6 +81,16 @@ def run(args: argparse.Namespace) -> int:
     jobs = args.jobs or os.cpu_count() or 1
     print(f"reproduce: {len(runs)} runs of {args.budget} episodes on {jobs} processes ({args.backend})")
     print(f"reproduce: runs in {runs_dir}, the report in {args.out}")
-    path, _ = reproduce(args.out, runs, jobs=jobs, backend=args.backend, command=args.command_line)
+    ended = 0
+
+    def report(outcome: RunOutcome) -> None:
+        nonlocal ended
+        ended += 1
+        resumed = f" from episode {outcome.resumed_from}" if outcome.resumed_from else ""
+        name, success = outcome.run.out_dir.name, 100 * outcome.success
+        took = f"{outcome.wall_seconds:.0f} s{resumed}"
+        print(f"reproduce: [{ended}/{len(runs)}] {name}: {success:.0f} % ({took})", flush=True)
+
+    path, _ = reproduce(args.out, runs, jobs=jobs, backend=args.backend, command=args.command_line, on_finished=report)
     print(path.read_text())
     return 0
