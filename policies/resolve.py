@@ -48,6 +48,7 @@ def resolve_policy(spec: str, env: Any, *, allow_other_task: bool = False) -> tu
         expert = ScriptedExpert(env)
         return expert, expert.reset
     if spec == "random":
+        env.action_space.seed(0)  # gymnasium leaves it unseeded: the same episodes then draw the same actions
         return (lambda _obs: env.action_space.sample()), _no_reset
     if spec == PRETRAINED:
         spec = str(pretrained_path(env))

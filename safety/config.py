@@ -184,8 +184,8 @@ class SafetyConfig:
     stiffness_max_n_per_m: float = 5000.0
     stiffness_forgetting: float = 0.98
     force_sensing_error_n: float = 0.0
-    # The task flap's: 3 x E t at its stiffest default (14 kPa, 3 mm); sim.force_sensing.tissue_bounds.
-    tissue_stiffness_bound_n_per_m: float = 126.0
+    # The task flap's: 2.64 x E t at its stiffest default (14 kPa, 3 mm); sim.force_sensing.tissue_bounds.
+    tissue_stiffness_bound_n_per_m: float = 110.88
     # The task flap's weight at its largest default size, density and thickness (0.27 N), rounded up.
     held_load_bound_n: float = 0.3
     deadman_timeout_s: float = 0.05

@@ -11,7 +11,7 @@ below its limit from two upper bounds, tick by tick, and uses the one that leave
   ``held_load_bound_n`` (its load at the grasp) plus ``tissue_stiffness_bound_n_per_m`` times the grasp
   point's travel since. The filter then limits that travel, as if the force were the bound's: no force
   measurement is used at all. The stiffness bound comes from the tissue's physical parameters
-  (:func:`sim.force_sensing.tissue_bounds`: 3 x E t at the stiffest E and thickness of the range).
+  (:func:`sim.force_sensing.tissue_bounds`: 2.64 x E t at the stiffest E and thickness of the range).
 
 With an inexact sensor the tissue-stiffness estimate (:class:`safety.stiffness.StiffnessEstimator`) is not
 used: its force increments would carry the sensing's pose- and motion-dependent error as stiffness. Both
@@ -112,6 +112,10 @@ class ForceBound:
         """A new episode: no grasp yet."""
         self._grasped_at: np.ndarray | None = None
         self._open_s = math.inf  # how long the jaws have been open
+        #: The travel bound on the true force's magnitude at the last update [N]: the held-load bound plus the
+        #: stiffness bound times the travel since the grasp. NaN while the jaws cannot hold tissue, and with an
+        #: exact sensor. What ``bench safety`` holds the true force against, to check the tissue bounds.
+        self.travel_bound_n = math.nan
 
     def update(
         self, jaw_rad: float, grasp_point_m: np.ndarray, measured_force_n: np.ndarray, learned_stiffness_n_per_m: float
@@ -128,10 +132,12 @@ class ForceBound:
         stiffness = self.stiffness_bound_n_per_m
         measured = ForceEstimate(measured_force_n, self.error_n, stiffness, MEASURED)
         if self._grasped_at is None or self._open_s >= RELEASE_S:
+            self.travel_bound_n = math.nan
             return measured
         travel = stiffness * (np.asarray(grasp_point_m, dtype=float) - self._grasped_at)
+        self.travel_bound_n = self.held_load_bound_n + math.sqrt(float(travel @ travel))
         measured_room = self.limit_n - self.error_n - math.sqrt(float(measured_force_n @ measured_force_n))
-        travel_room = self.limit_n - self.held_load_bound_n - math.sqrt(float(travel @ travel))
+        travel_room = self.limit_n - self.travel_bound_n
         if measured_room >= travel_room:  # NaN in the measurement fails this: the travel bound needs none
             return measured
         return ForceEstimate(travel, self.held_load_bound_n, stiffness, TRAVEL)

@@ -116,6 +116,9 @@ class EpisodeResult:
     force_limit_stall: list[dict[str, Any]] = field(default_factory=list)
     #: Distance of the site the policy observed at the start to the true site [mm] (None: the truth itself).
     site_error_mm: float | None = None
+    #: The true force over the force bound's travel bound, at its largest (None: the travel bound was never
+    #: in force: an exact sensor, or no grasp). Above 1, the tissue was stiffer or heavier than its bounds.
+    peak_force_over_travel_bound: float | None = None
 
     @property
     def force_over_limit_s(self) -> float:
@@ -185,6 +188,7 @@ def run_episode(
         force_limit_exceeded=list(info["force_limit_exceeded"]),
         force_limit_stall=list(info["force_limit_stall"]),
         site_error_mm=site_error_mm,
+        peak_force_over_travel_bound=info["force_over_travel_bound_peak"],
     )
 
 

@@ -300,8 +300,9 @@ def error_bound_n(params: SensingParams, *, samples: int = 2000, seed: int = 0) 
 #: The travel bound's stiffness over ``E t`` (:mod:`safety.force_bound`). Measured: the tasks' expert
 #: episodes (ideal sensing, grasp point 1-30 mm from where the jaws closed) met at most 0.96 E t per metre of
 #: travel; ``bench safety``'s adversaries up to 2.4 E t (SignFlipPull on a MultiSite site one node from a
-#: pinned edge, flap at 3 x E). 3 keeps a margin over the worst measured.
-STIFFNESS_BOUND_PER_E_T = 3.0
+#: pinned edge, flap at 3 x E). The bound is that worst plus 10 %, the margin :func:`error_bound_n` takes over
+#: its worst draw; the promise (peak <= 1.10 x the limit) then holds up to 2.9 E t.
+STIFFNESS_BOUND_PER_E_T = 2.64
 #: The held load at the grasp over the flap's whole weight: the flap's weight, and a light press.
 HELD_LOAD_PER_WEIGHT = 1.2
 
@@ -309,7 +310,7 @@ HELD_LOAD_PER_WEIGHT = 1.2
 def tissue_bounds(ranges: Mapping[str, tuple[float, float]]) -> tuple[float, float]:
     """The tissue stiffness bound [N/m] and held-load bound [N] of a randomization's tissue ranges.
 
-    The stiffest and heaviest flap the ranges allow: ``3 E t`` at the largest modulus and thickness,
+    The stiffest and heaviest flap the ranges allow: ``2.64 E t`` at the largest modulus and thickness,
     and 1.2 times the weight at the largest size, density, thickness and gravity.
     """
     e_pa = 1e3 * ranges["tissue_youngs_modulus_kpa"][1]

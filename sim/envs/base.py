@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -243,6 +244,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._force = np.zeros(3)
         self._sensed_force = np.zeros(3)
         self._sensed_peak = 0.0
+        self._force_over_travel_bound: float | None = None
         self._strain = 0.0
         self._holding_steps = 0
         self._last_measured = self._measured()
@@ -269,6 +271,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         peak = 0.0
         while done < physics.substeps:
             output = self.controller.tick(measured)
+            self._check_travel_bound()
             if output.safety_stop:
                 stops += 1
                 reasons.append(output.reason)
@@ -422,6 +425,14 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._force_watch.update(self._force, self._ticks * self._force_watch.period_s)
         return float(np.linalg.norm(self._force))
 
+    def _check_travel_bound(self) -> None:
+        """Hold the true force of the tick the chain just filtered against its travel bound (NaN: not in force)."""
+        assert self.controller is not None
+        bound = self.controller.force_bound.travel_bound_n
+        if not math.isnan(bound):
+            ratio = float(np.linalg.norm(self._force)) / bound
+            self._force_over_travel_bound = max(ratio, self._force_over_travel_bound or 0.0)
+
     def _measured(self) -> MeasuredState:
         """The arm's measurement, with the force as the robot senses it (the true one with ``ideal``)."""
         assert self.scene is not None and self.controller is not None
@@ -534,6 +545,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         info["force_limit_n"] = self._force_watch.limit_n
         info["measured_force_n"] = self._sensed_force.copy()
         info["measured_force_peak_n"] = self._sensed_peak
+        info["force_over_travel_bound_peak"] = self._force_over_travel_bound
         info["force_limit_exceeded"] = tuple(e.to_event() for e in self._force_watch.all())
         info["force_limit_stall"] = tuple(e for e in self._controller_events if e["kind"] == FORCE_LIMIT_STALL)
         return info

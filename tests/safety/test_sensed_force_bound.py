@@ -45,6 +45,23 @@ def test_a_measurement_that_cannot_tell_the_limit_gives_way_to_the_travel_bound(
     assert np.allclose(bound.update(_CLOSED, np.ones(3), measured, 400.0).force_n, 0.0)
 
 
+def test_the_travel_bound_is_told_only_while_the_jaws_may_hold_tissue() -> None:
+    """``travel_bound_n`` is the held load plus stiffness x travel while held; NaN before, after and when exact."""
+    bound = ForceBound(3.0, 2.0, 60.0, 0.3, 0.01)
+    bound.update(_OPEN, np.zeros(3), np.zeros(3), 400.0)
+    assert np.isnan(bound.travel_bound_n)
+    bound.update(_CLOSED, np.zeros(3), np.zeros(3), 400.0)
+    assert bound.travel_bound_n == pytest.approx(0.3)
+    bound.update(_CLOSED, np.array([0.0, 0.003, 0.004]), np.zeros(3), 400.0)
+    assert bound.travel_bound_n == pytest.approx(0.3 + 60.0 * 0.005)
+    for _ in range(21):
+        bound.update(_OPEN, np.zeros(3), np.zeros(3), 400.0)
+    assert np.isnan(bound.travel_bound_n)
+    exact = ForceBound(3.0, 0.0, 60.0, 0.3, 0.01)
+    exact.update(_CLOSED, np.ones(3), np.zeros(3), 400.0)
+    assert np.isnan(exact.travel_bound_n)
+
+
 def test_the_bound_that_leaves_more_room_is_used() -> None:
     """A small error: the measured force (with the error as margin) wins over a long travel; NaN never does."""
     bound = ForceBound(3.0, 0.5, 60.0, 0.3, 0.01)

@@ -7,9 +7,11 @@ on (not those the filter was developed on). It prints the worst peak force over 
 overall against the bound (1.10), and the expert's and shipped policies' success with the filter on and
 off (``--no-safety``) at the generic preset. ``--force-sensing`` gives the filter the force a dVRK senses
 (:mod:`sim.force_sensing`); the peak is always the true force's, and the environments declare the whole
-0.3-3 x E range as the tissue the filter must expect. Episodes on a flap the solver broke while settling (stiff
-flaps, see docs/simulation.md) end at once as unstable and are counted, not scored. Exit status 0 when the bound
-held, 1 when it did not.
+0.3-3 x E range as the tissue the filter must expect. With an inexact force it also holds the true force
+against the force bound's travel bound (:mod:`safety.force_bound`) while that was in force: the largest
+ratio says how near the tissue came to its stiffness and held-load bounds (above 1, beyond them). Episodes
+on a flap the solver broke while settling (stiff flaps, see docs/simulation.md) end at once as unstable and
+are counted, not scored. Exit status 0 when the bound held, 1 when it did not.
 """
 
 from __future__ import annotations
@@ -90,11 +92,22 @@ def _cell_group(
                             "force_limit_n": result.force_limit_n,
                             "ratio": result.peak_force_n / result.force_limit_n,
                             "force_limit_exceeded": len(result.force_limit_exceeded),
+                            "force_over_travel_bound": result.peak_force_over_travel_bound,
                         }
                     )
     finally:
         env.close()
     return rows
+
+
+def _where(row: dict[str, Any]) -> str:
+    return f"{row['task']}, {row['preset']} ({row['force_limit_n']:g} N), {row['stiffness']:g} x E, seed {row['seed']}"
+
+
+def _worst_over_travel_bound(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The episode whose true force came nearest its travel bound (None: the bound was never in force)."""
+    bounded = [r for r in rows if r["force_over_travel_bound"] is not None]
+    return max(bounded, key=lambda r: r["force_over_travel_bound"]) if bounded else None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -111,25 +124,27 @@ def run(args: argparse.Namespace) -> int:
         for future in futures:
             rows += future.result()
     filtered = [r for r in rows if r["safety"] and not r["unstable"]]
-    console = Console(width=120)
+    console = Console(width=150)
     table = Table(
         title=f"force bound: true peak / limit over {len(filtered)} episodes with the filter on (bound {BOUND}), "
         f"{args.force_sensing} force sensing"
     )
-    for column in ("policy", "episodes", "unstable", "exceedances", "worst peak / limit", "where"):
+    travel_column = "true force / travel bound"
+    for column in ("policy", "episodes", "unstable", "exceedances", "worst peak / limit", "where", travel_column):
         table.add_column(column, justify="left" if column in ("policy", "where") else "right")
     for policy in POLICIES:
         mine = [r for r in filtered if r["policy"] == policy]
         unstable = sum(r["unstable"] for r in rows if r["safety"] and r["policy"] == policy)
         worst = max(mine, key=lambda r: r["ratio"])
+        travel = _worst_over_travel_bound(mine)
         table.add_row(
             policy,
             str(len(mine)),
             str(unstable),
             str(sum(r["force_limit_exceeded"] for r in mine)),
             f"{worst['ratio']:.3f}",
-            f"{worst['task']}, {worst['preset']} ({worst['force_limit_n']:g} N), "
-            f"{worst['stiffness']:g} x E, seed {worst['seed']}: {worst['peak_force_n']:.3f} N",
+            _where(worst) + f": {worst['peak_force_n']:.3f} N",
+            "-" if travel is None else f"{travel['force_over_travel_bound']:.3f}",
         )
     console.print(table)
     success = Table(title="success at the generic preset, filter on / --no-safety (episodes on a broken flap left out)")
@@ -156,11 +171,17 @@ def run(args: argparse.Namespace) -> int:
     overall = max(filtered, key=lambda r: r["ratio"])
     held = overall["ratio"] <= BOUND
     print(f"worst peak / limit {overall['ratio']:.3f}: the bound {BOUND} {'held' if held else 'did NOT hold'}")
+    travel = _worst_over_travel_bound(filtered)
+    if travel is not None:
+        ratio = travel["force_over_travel_bound"]
+        verdict = "the tissue bounds held" if ratio <= 1.0 else "the tissue was stiffer or heavier than its bounds"
+        print(f"worst true force / travel bound {ratio:.3f} ({travel['policy']}, {_where(travel)}): {verdict}")
     if args.json:
         document = {
             "bound": BOUND,
             "force_sensing": args.force_sensing,
             "worst_peak_over_limit": overall["ratio"],
+            "worst_force_over_travel_bound": None if travel is None else travel["force_over_travel_bound"],
             "episodes": rows,
         }
         write_strict_json(Path(args.json), document, indent=1)
