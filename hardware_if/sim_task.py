@@ -34,6 +34,7 @@ from hardware_if.endoscope_stream import EndoscopeStream, SceneState
 from hardware_if.motion import inverse_kinematics
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from safety.config import SafetyConfig
+from safety.force_bound import ForceBound
 from sim.scene import PhysicsParams
 from sim.strict_json import strict_dumps
 from sim.tissue import SITE_NAMES, TissueParams
@@ -85,14 +86,16 @@ class SetpointFollower:
 
     The simulated console owns the set-point (from ``servo_jp`` or its own trajectories); the
     environment's step asks this object for the command of each physics tick. ``config`` (the default
-    :class:`~safety.config.SafetyConfig`, for the environment's workspace report) and an empty ``log``
-    stand in for the control chain's attributes the environment reads.
+    :class:`~safety.config.SafetyConfig`, for the environment's workspace report), an empty ``log`` and a
+    ``force_bound`` never updated (the travel bound is the deploying chain's, in its own process) stand in for
+    the control chain's attributes the environment reads.
     """
 
     def __init__(self, control_period_s: float, q: np.ndarray, jaw: float) -> None:
         self.control_period_s = control_period_s
         self.config = SafetyConfig()
         self.log: list[object] = []
+        self.force_bound = ForceBound.from_config(self.config)
         self.q = np.asarray(q, dtype=float).copy()
         self.jaw = float(jaw)
         self._zeros = np.zeros(6)
