@@ -220,14 +220,33 @@ def _git(*args: str) -> str | None:
     return out.stdout.strip() if out.returncode == 0 else None
 
 
+#: The vector extensions that choose torch's and numpy's kernels, widest first.
+_SIMD = ("avx512f", "avx2", "avx", "sse4_2", "neon", "asimd")
+
+
 def machine() -> dict[str, Any]:
-    """What a run's wall time was measured on: the CPU model, its logical cores, Python and torch."""
-    cpu = platform.processor() or platform.machine()
+    """What a run trained on: the CPU (model name, family and model numbers, widest vector extension), its
+    logical cores, Python, torch and numpy.
+
+    Training is deterministic on one machine, but the same seed and code can train another policy on a CPU
+    whose kernels round differently (a virtual CPU's model name alone may not tell them apart).
+    """
+    info: dict[str, str] = {}
     with contextlib.suppress(OSError):
-        names = [line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                 if line.startswith("model name")]  # fmt: skip
-        cpu = names[0] if names else cpu
-    return {"cpu": cpu, "cpus": os.cpu_count(), "python": platform.python_version(), "torch": torch.__version__}
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            info.setdefault(key.strip(), value.strip())  # the first processor's
+    flags = set(info.get("flags", info.get("Features", "")).split())
+    return {
+        "cpu": info.get("model name") or platform.processor() or platform.machine(),
+        "cpu_family": info.get("cpu family", ""),
+        "cpu_model": info.get("model", ""),
+        "simd": next((name for name in _SIMD if name in flags), ""),
+        "cpus": os.cpu_count(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+    }
 
 
 def code_identity() -> dict[str, Any]:
@@ -292,9 +311,10 @@ def run_all(
         with ray_cluster(jobs) as ray:
             # One CPU per run, as on the local pool; a failed run is reported, not retried.
             remote = ray.remote(num_cpus=1, max_retries=0)(_execute)
-            refs = [remote.remote(run) for run in runs]
-            for run, ref in zip(runs, refs, strict=True):
-                collect(run, functools.partial(ray.get, ref))
+            pending = {remote.remote(run): run for run in runs}
+            while pending:  # in the order they end, as on the local pool
+                (ref,), _ = ray.wait(list(pending), num_returns=1)
+                collect(pending.pop(ref), functools.partial(ray.get, ref))
     elif jobs <= 1:
         for run in runs:
             collect(run, functools.partial(_execute, run))
@@ -666,7 +686,11 @@ def _machines(outcomes: Sequence[RunOutcome]) -> list[dict[str, Any]]:
 
 
 def _machine_line(m: dict[str, Any]) -> str:
-    return f"{m.get('cpu')}, {m.get('cpus')} logical cores, Python {m.get('python')}, torch {m.get('torch')}"
+    cpu = str(m.get("cpu"))
+    if m.get("cpu_family"):  # records written before these were kept have only the model name
+        cpu += f" (family {m['cpu_family']} model {m['cpu_model']}, {m['simd'] or 'no'} vectors)"
+    versions = f"Python {m.get('python')}, torch {m.get('torch')}" + (f", numpy {m['numpy']}" if "numpy" in m else "")
+    return f"{cpu}, {m.get('cpus')} logical cores, {versions}"
 
 
 def _seeds(runs: Sequence[Run]) -> str:
