@@ -253,7 +253,8 @@ def site_error_summary(results: Sequence[EpisodeResult]) -> dict[str, Any]:
 
 
 def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """How often, how long and how far the force went past its limit, and where it held a retraction back.
+    """How often, how long and how far the force went past its limit, where it held a retraction back, and how
+    near the true force came to the travel bound (:mod:`safety.force_bound`) while that was in force.
 
     The records are :meth:`EpisodeResult.to_dict` entries, as evaluate keeps them and sweeps store them
     (a record from before the force was watched counts as none).
@@ -264,6 +265,7 @@ def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]
     stalls = [e for r in episodes for e in r.get("force_limit_stall") or ()]
     loads = [float(e["static_load_n"]) for e in stalls]
     load_ratios = [float(e["static_load_n"]) / float(e["limit_n"]) for e in stalls]
+    travel = [float(r["peak_force_over_travel_bound"]) for r in episodes if r.get("peak_force_over_travel_bound")]
     return {
         "force_limit_n": max(limits, default=math.nan),
         "force_limit_exceeded": sum(len(e) for e in excursions),
@@ -273,6 +275,8 @@ def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]
         "force_limit_stalls": len(stalls),
         "stall_static_load_n": float(np.median(loads)) if loads else math.nan,
         "stall_static_load_to_limit": max(load_ratios, default=math.nan),
+        # None: the travel bound was never in force (an exact sensor, or nothing grasped).
+        "worst_force_over_travel_bound": max(travel, default=None),
     }
 
 

@@ -10,7 +10,7 @@ from hardware_if.wrench_calibration import fit_calibration
 from policies.resolve import resolve_policy
 from psm_control.errors import UnknownVariantError
 from psm_control.robot import PsmModel
-from sim.evaluation import run_episode
+from sim.evaluation import force_limit_summary, run_episode
 from sim.force_sensing import (
     SENSING_NAMES,
     ForceSensor,
@@ -133,7 +133,9 @@ def test_episodes_hold_the_true_force_against_the_travel_bound(sensing: str) -> 
         env.close()
     assert all(r.success for r in results)
     ratios = [r.peak_force_over_travel_bound for r in results]
+    worst = force_limit_summary([r.to_dict() for r in results])["worst_force_over_travel_bound"]
     if sensing == "ideal":
-        assert ratios == [None, None]
+        assert ratios == [None, None] and worst is None
     else:
         assert all(ratio is not None and 0.0 < ratio <= 1.0 for ratio in ratios), ratios
+        assert worst == max(r for r in ratios if r is not None)

@@ -222,6 +222,8 @@ def run(args: argparse.Namespace) -> int:
     if args.force_sensing != "ideal":
         table.add_row(f"peak sensed force [N] ({args.force_sensing})", f"{summary['peak_measured_force_n']:.3f}")
         table.add_row("force sensing error bound [N]", f"{summary['force_sensing_error_n']:.3f}")
+        travel = summary["worst_force_over_travel_bound"]
+        table.add_row("true force / travel bound", "never in force" if travel is None else f"at most {travel:.3f}")
     if "site_error_mm" in summary:
         error = summary["site_error_mm"]
         table.add_row(
