@@ -63,10 +63,10 @@ def console() -> Iterator[tuple[SimulatedPsm, Operator]]:
     thread.start()
     yield sim, operator
     executor.shutdown()
+    thread.join(timeout=5.0)  # before the context goes: a spin still waiting on it raises in its thread
     sim.destroy_node()
     operator.destroy_node()
     rclpy.shutdown(context=context)
-    thread.join(timeout=5.0)
 
 
 def _send(operator: Operator, command: str) -> None:
