@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import functools
+import importlib.metadata
 import json
 import math
 import multiprocessing
@@ -222,11 +223,20 @@ def _git(*args: str) -> str | None:
 
 #: The vector extensions that choose torch's and numpy's kernels, widest first.
 _SIMD = ("avx512f", "avx2", "avx", "sse4_2", "neon", "asimd")
+#: The packages besides torch whose versions change what a run computes: its arrays, its physics, its kinematics.
+_PACKAGES = ("numpy", "pybullet", "pin")
+
+
+def _package_version(name: str) -> str:
+    try:
+        return importlib.metadata.version(name)
+    except importlib.metadata.PackageNotFoundError:
+        return ""
 
 
 def machine() -> dict[str, Any]:
     """What a run trained on: the CPU (model name, family and model numbers, widest vector extension), its
-    logical cores, Python, torch and numpy.
+    logical cores, Python, torch and the versions of :data:`_PACKAGES`.
 
     Training is deterministic on one machine, but the same seed and code can train another policy on a CPU
     whose kernels round differently (a virtual CPU's model name alone may not tell them apart).
@@ -245,7 +255,7 @@ def machine() -> dict[str, Any]:
         "cpus": os.cpu_count(),
         "python": platform.python_version(),
         "torch": torch.__version__,
-        "numpy": np.__version__,
+        "packages": {name: _package_version(name) for name in _PACKAGES},
     }
 
 
@@ -689,8 +699,8 @@ def _machine_line(m: dict[str, Any]) -> str:
     cpu = str(m.get("cpu"))
     if m.get("cpu_family"):  # records written before these were kept have only the model name
         cpu += f" (family {m['cpu_family']} model {m['cpu_model']}, {m['simd'] or 'no'} vectors)"
-    versions = f"Python {m.get('python')}, torch {m.get('torch')}" + (f", numpy {m['numpy']}" if "numpy" in m else "")
-    return f"{cpu}, {m.get('cpus')} logical cores, {versions}"
+    packages = "".join(f", {name} {version}" for name, version in m.get("packages", {}).items())
+    return f"{cpu}, {m.get('cpus')} logical cores, Python {m.get('python')}, torch {m.get('torch')}{packages}"
 
 
 def _seeds(runs: Sequence[Run]) -> str:

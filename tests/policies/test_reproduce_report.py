@@ -100,7 +100,9 @@ def test_results_json_and_the_page(tmp_path: Path) -> None:
     assert all(r["wall_seconds"] > 0 and r["episodes"] == 2 for r in results["runs"])
     assert [m["cpus"] for m in results["machines"]] == [os.cpu_count()]
     # What tells two CPUs apart whose kernels may round differently, and the library versions.
-    assert {"cpu", "cpu_family", "cpu_model", "simd", "python", "torch", "numpy"} <= set(results["machines"][0])
+    machine = results["machines"][0]
+    assert {"cpu", "cpu_family", "cpu_model", "simd", "python", "torch"} <= set(machine)
+    assert all(machine["packages"][name] for name in ("numpy", "pybullet", "pin")), machine
 
     screenshot = tmp_path / "page.png"
     text, layout = render(tmp_path / "results.html", screenshot)
