@@ -20,6 +20,7 @@ from sim.force_sensing import (
     tissue_bounds,
 )
 from sim.randomization import DEFAULT_RANGES
+from tissue_retract.cli.bench_safety import _cell_group
 
 
 def _poses(rng: np.random.Generator, count: int) -> list[np.ndarray]:
@@ -139,3 +140,11 @@ def test_episodes_hold_the_true_force_against_the_travel_bound(sensing: str) -> 
     else:
         assert all(ratio is not None and 0.0 < ratio <= 1.0 for ratio in ratios), ratios
         assert worst == max(r for r in ratios if r is not None)
+
+
+def test_the_tissue_bounds_hold_where_bench_safety_came_nearest_them() -> None:
+    """bench safety's nearest cell (SignFlipPull, MultiSite, bowel 5 N, dvrk sensing): within the travel bound."""
+    rows = _cell_group("multisite", "bowel", True, ("sim.pulling:SignFlipPull",), 1, 91, "dvrk")
+    assert [row["stiffness"] for row in rows] == [0.3, 1.0, 3.0]
+    assert all(row["ratio"] <= 1.10 and row["force_over_travel_bound"] <= 1.0 for row in rows), rows
+    assert max(row["force_over_travel_bound"] for row in rows) > 0.5  # the travel bound was in force, held to
