@@ -186,8 +186,9 @@ class SafetyConfig:
     force_sensing_error_n: float = 0.0
     # The task flap's: 2.64 x E t at its stiffest default (14 kPa, 3 mm); sim.force_sensing.tissue_bounds.
     tissue_stiffness_bound_n_per_m: float = 110.88
-    # The task flap's weight at its largest default size, density and thickness (0.27 N), rounded up.
-    held_load_bound_n: float = 0.3
+    # 1.2 x the task flap's weight at its largest default size, density, thickness and gravity (0.32 N),
+    # rounded up; sim.force_sensing.tissue_bounds.
+    held_load_bound_n: float = 0.33
     deadman_timeout_s: float = 0.05
     max_translation_m: float = 0.05
     max_yaw_rad: float = 0.5

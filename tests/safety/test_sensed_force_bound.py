@@ -76,7 +76,9 @@ def test_the_bound_that_leaves_more_room_is_used() -> None:
 
 def test_the_warning_names_the_limit_the_error_and_what_keeps_the_limit() -> None:
     """A limit at or below the sensing's error bound is warned about with its numbers; others are not."""
-    nerve = SafetyConfig(tissue="nerve", force_sensing_error_n=8.9, tissue_stiffness_bound_n_per_m=63.0)
+    nerve = SafetyConfig(
+        tissue="nerve", force_sensing_error_n=8.9, tissue_stiffness_bound_n_per_m=63.0, held_load_bound_n=0.3
+    )
     text = sensing_warning(nerve, "dvrk force sensing")
     assert text.startswith("WARNING: force limit 0.4 N is below the force sensing's error bound 8.90 N")
     assert "63 N/m" in text and "1.6 mm of travel" in text

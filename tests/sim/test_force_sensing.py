@@ -10,6 +10,7 @@ from hardware_if.wrench_calibration import fit_calibration
 from policies.resolve import resolve_policy
 from psm_control.errors import UnknownVariantError
 from psm_control.robot import PsmModel
+from safety.config import SafetyConfig
 from sim.evaluation import force_limit_summary, run_episode
 from sim.force_sensing import (
     SENSING_NAMES,
@@ -97,6 +98,9 @@ def test_tissue_bounds_follow_the_ranges() -> None:
     assert 0.2 < load < 0.4
     stiffer = dict(DEFAULT_RANGES, tissue_youngs_modulus_kpa=(18.0, 42.0))
     assert tissue_bounds(stiffer)[0] == pytest.approx(3 * stiffness)
+    # SafetyConfig's defaults (safety/ cannot import sim/) are the task flap's bounds, the load rounded up.
+    assert SafetyConfig().tissue_stiffness_bound_n_per_m == pytest.approx(stiffness)
+    assert load <= SafetyConfig().held_load_bound_n < load + 0.01
 
 
 def test_calibration_fit_removes_gravity_and_friction() -> None:
