@@ -144,8 +144,12 @@ def test_deploy_onto_a_full_file_system_holds_with_exit_4(tiny: Path) -> None:
     """``deploy --record`` on a 1 MiB tmpfs: ``HOLD: recording failed: <path>: ...``, exit 4, hold in the file."""
     path = tiny / "run.mcap"
     command = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", "scripted", "--target", "sim"]
+    # A generous policy budget: on a loaded machine a slow step would hold first, for another reason.
     done = subprocess.run(
-        [*command, "--episodes", "40", "--record", str(path)], capture_output=True, text=True, timeout=600
+        [*command, "--episodes", "40", "--record", str(path), "--policy-budget", "600"],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert done.returncode == 4, done.stdout + done.stderr
     assert f"HOLD: recording failed: {path}: No space left on device (ENOSPC)" in done.stdout

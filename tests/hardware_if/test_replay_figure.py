@@ -24,7 +24,7 @@ def held_run(tmp_path_factory: pytest.TempPathFactory) -> Recording:
     config.write_text("force_limit_n = 0.08\n")
     command = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", "tissue_retract.faults:Raises"]
     command += ["--target", "sim", "--task", "lift", "--episodes", "2", "--safety-config", str(config)]
-    command += ["--record", str(folder / "run.mcap")]
+    command += ["--record", str(folder / "run.mcap"), "--policy-budget", "600"]  # the hold is the policy's error
     env = dict(os.environ, **{AT_VARIABLE: "1:20"})
     subprocess.run(command, env=env, capture_output=True, text=True, timeout=600, check=False)
     return load_recording(folder / "run.mcap")
