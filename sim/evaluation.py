@@ -265,7 +265,9 @@ def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]
     stalls = [e for r in episodes for e in r.get("force_limit_stall") or ()]
     loads = [float(e["static_load_n"]) for e in stalls]
     load_ratios = [float(e["static_load_n"]) / float(e["limit_n"]) for e in stalls]
-    travel = [float(r["peak_force_over_travel_bound"]) for r in episodes if r.get("peak_force_over_travel_bound")]
+    travel = [
+        float(r["peak_force_over_travel_bound"]) for r in episodes if r.get("peak_force_over_travel_bound") is not None
+    ]
     return {
         "force_limit_n": max(limits, default=math.nan),
         "force_limit_exceeded": sum(len(e) for e in excursions),
