@@ -12,12 +12,14 @@ The ``.npz`` layout read here (one array per key, N episodes of T steps):
 
 The simulation's writer (``tissue-retract demo --task ID --episodes N --out demos.npz``) produces this
 layout. Without a file, episodes are generated with the task's scripted expert (:func:`expert_for`):
-the toy task's is :func:`policies.toy_env.toy_expert`; the simulation's is ``sim.expert.ScriptedExpert``.
+the toy task's is :func:`policies.toy_env.toy_expert`; the simulation's is ``sim.expert.ScriptedExpert``, acting
+on what the learner observes (``observed=True``: the estimated site of ``train --blind`` or ``--perception``).
 Only successful expert episodes are kept (``info["is_success"]`` and not ``info["sim_unstable"]``).
 """
 
 from __future__ import annotations
 
+import functools
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -98,7 +100,7 @@ def expert_for(task_id: str) -> ExpertFactory:
     if task_id == TOY_TASK_ID:
         return lambda env: _FunctionController(env, toy_expert)
     if task_id.startswith("TissueRetract-"):
-        return ScriptedExpert
+        return functools.partial(ScriptedExpert, observed=True)
     raise DemonstrationError(
         f"no scripted expert is known for {task_id!r}: write demonstrations to a file "
         "(tissue-retract demo --task ID --episodes N --out demos.npz) and pass --demos-file demos.npz"

@@ -75,3 +75,26 @@ def test_for_training_the_reward_sees_the_truth_and_the_policy_the_estimate() ->
         assert len({round(d, 9) for d in distances}) == len(distances), "a new distance every episode"
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("observed", [True, False])
+def test_the_observing_expert_carries_the_observed_site_to_the_goal(observed: bool) -> None:
+    """``observed=True`` ends with the registered site on the goal, the privileged expert with the true one.
+
+    The registration is 4 mm off, so whichever site the expert steers, the other ends about that far away.
+    """
+    env = RegisteredTask(sim.envs.make("lift"), registration_error_m=0.004)
+    try:
+        expert = ScriptedExpert(env, observed=observed)
+        observation, _ = env.reset(seed=SEED)
+        expert.reset()
+        for _ in range(sim.envs.MAX_EPISODE_STEPS):
+            observation, _, _, _, _ = env.step(expert(observation))
+        task = env.unwrapped
+        seen_m = float(np.linalg.norm(observation["achieved_goal"] - task.goal))
+        true_m = float(np.linalg.norm(task.site_position() - task.goal))
+    finally:
+        env.close()
+    steered_m, other_m = (seen_m, true_m) if observed else (true_m, seen_m)
+    assert steered_m < 0.0015
+    assert other_m > 0.0025
