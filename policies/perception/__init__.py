@@ -9,11 +9,12 @@ within a wall-clock budget and measures its held-out error.
 from __future__ import annotations
 
 from policies.perception.frames import LabelledFrames, render_frames
-from policies.perception.network import SHIPPED_MODEL, SiteEstimator, SiteNet, load_estimator
+from policies.perception.network import SHIPPED_MODEL, SHIPPED_MODELS, SiteEstimator, SiteNet, load_estimator
 from policies.perception.training import TrainingReport, train_site_estimator
 
 __all__ = [
     "SHIPPED_MODEL",
+    "SHIPPED_MODELS",
     "LabelledFrames",
     "SiteEstimator",
     "SiteNet",

@@ -30,10 +30,13 @@ from psm_control.errors import InputFileError
 from psm_control.inputs import check_regular_file
 from sim.endoscope import Endoscope, StereoFrame
 
-__all__ = ["SHIPPED_MODEL", "SiteEstimator", "SiteNet", "load_estimator"]
+__all__ = ["SHIPPED_MODEL", "SHIPPED_MODELS", "SiteEstimator", "SiteNet", "load_estimator"]
 
-#: The model shipped with the package (trained by ``tissue-retract train-perception``).
+#: The model shipped with the package (trained by ``tissue-retract train-perception`` on the tasks' pink flaps).
 SHIPPED_MODEL = Path(__file__).resolve().parent / "site-estimator.safetensors"
+#: The shipped models by the name ``--perception camera:NAME`` takes: ``any-colour`` was trained by
+#: ``train-perception --any-colour`` on flaps of any colour, for a flap that does not look like the tasks'.
+SHIPPED_MODELS = {"any-colour": SHIPPED_MODEL.with_name("site-estimator-any-colour.safetensors")}
 _FORMAT = "tissue-retract-site-estimator"
 _MAX_FILE_BYTES = 64 * 1024 * 1024
 
@@ -136,12 +139,13 @@ class SiteEstimator:
 
 
 def load_estimator(path: str | Path | None = None) -> SiteEstimator:
-    """Read a model file (default: the shipped one) without executing anything from it.
+    """Read a model file (default: the shipped one; a name of :data:`SHIPPED_MODELS`: that shipped one)
+    without executing anything from it.
 
     Raises:
         CheckpointError: The file is missing, not a safetensors file, or not a site estimator's.
     """
-    path = Path(path) if path is not None else SHIPPED_MODEL
+    path = SHIPPED_MODEL if path is None else SHIPPED_MODELS.get(str(path), Path(path))
     if not path.exists():
         raise CheckpointError(path, "no such file")
     try:

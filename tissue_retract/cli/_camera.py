@@ -51,7 +51,8 @@ def add_perception_argument(parser: argparse.ArgumentParser) -> None:
         metavar="camera[:MODEL]",
         default=None,
         help="Tasks I-III: the observation's site from the site estimator on the endoscope's stereo images "
-        "(MODEL: a train-perception model file; default: the shipped one), a jaw-sensed grasp",
+        "(MODEL: a train-perception model file, or any-colour: the shipped one trained on flaps of any colour; "
+        "default: the shipped one trained on the tasks' pink flaps), a jaw-sensed grasp",
     )
 
 
@@ -61,7 +62,9 @@ def load_perception(value: str | None) -> Any:
         return None
     kind, _, model = value.partition(":")
     if kind != "camera":
-        raise ConfigurationError("--perception", value, "camera or camera:MODEL (a train-perception model file)")
+        raise ConfigurationError(
+            "--perception", value, "camera or camera:MODEL (a train-perception model file, or any-colour)"
+        )
     from policies.perception import load_estimator  # torch: only when the camera is used
 
     return load_estimator(model or None)
