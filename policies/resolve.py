@@ -11,7 +11,7 @@ import importlib
 from collections.abc import Callable
 from typing import Any
 
-from policies.shipped import PRETRAINED, pretrained_path
+from policies.shipped import PRETRAINED, pretrained_claim, pretrained_path
 from psm_control.errors import ConfigurationError
 from sim.evaluation import Policy
 from sim.expert import ScriptedExpert
@@ -51,6 +51,9 @@ def resolve_policy(spec: str, env: Any, *, allow_other_task: bool = False) -> tu
         env.action_space.seed(0)  # gymnasium leaves it unseeded: the same episodes then draw the same actions
         return (lambda _obs: env.action_space.sample()), _no_reset
     if spec == PRETRAINED:
+        # A shipped policy may have been trained on a task of the same spaces that includes this one's episodes.
+        claim = pretrained_claim(env)
+        allow_other_task = allow_other_task or claim.trained_on_task != claim.task_id
         spec = str(pretrained_path(env))
     if ":" in spec and not spec.endswith(_CHECKPOINT_SUFFIXES):
         module_name, _, attribute = spec.partition(":")

@@ -32,6 +32,7 @@ __all__ = [
     "ShippedClaim",
     "force_sensing_of",
     "policy_file",
+    "pretrained_claim",
     "pretrained_path",
     "shipped_claim",
     "shipped_policy_path",
@@ -107,8 +108,16 @@ def pretrained_path(env: Any) -> Path:
     Raises:
         UnknownVariantError: No policy is shipped for that task and variant.
     """
-    task_id = env.spec.id if env.spec is not None else type(env.unwrapped).__name__
-    return shipped_policy_path(task_id, variant_of(env))
+    return shipped_policy_path(_task_id(env), variant_of(env))
+
+
+def pretrained_claim(env: Any) -> ShippedClaim:
+    """The claim beside the shipped policy ``--policy pretrained`` loads for an environment."""
+    return shipped_claim(_task_id(env), variant_of(env))
+
+
+def _task_id(env: Any) -> str:
+    return str(env.spec.id if env.spec is not None else type(env.unwrapped).__name__)
 
 
 def policy_file(policy: str, task_id: str, variant: str = EXACT_SENSING) -> Path | None:
@@ -128,6 +137,9 @@ class ShippedClaim:
 
     Attributes:
         task_id: The task.
+        trained_on_task: The task whose episodes trained it: ``task_id``, or one with the same spaces whose
+            episodes include this task's (Task III's three sites include Task II's centre one), where that
+            policy did better (its sidecar's ``trained_on_task``).
         train_command: The command that produced the weights.
         evaluate_command: The command that measured the claim.
         episodes: Evaluation episodes.
@@ -136,6 +148,7 @@ class ShippedClaim:
     """
 
     task_id: str
+    trained_on_task: str
     train_command: str
     evaluate_command: str
     episodes: int
@@ -148,6 +161,7 @@ def shipped_claim(task_id: str, variant: str = EXACT_SENSING) -> ShippedClaim:
     data = json.loads(shipped_policy_path(task_id, variant).with_suffix(".json").read_text())
     return ShippedClaim(
         task_id=task_id,
+        trained_on_task=str(data.get("trained_on_task", task_id)),
         train_command=str(data["train_command"]),
         evaluate_command=str(data["evaluate_command"]),
         episodes=int(data["episodes"]),
