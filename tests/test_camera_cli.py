@@ -38,6 +38,21 @@ def test_evaluate_with_the_camera_on_an_unseen_texture_reports_the_site_error(tm
     assert summary["perception"] == "camera" and summary["texture"].endswith("stripes-green.png")
     assert set(summary["site_error_mm"]) == {"median", "p95", "max"}
     assert all(e["site_error_mm"] is not None for e in json.loads(out.read_text())["episodes"])
+    warning = "WARNING: the flap shows stripes-green.png, but the site estimator was trained on the tasks' pink flaps"
+    assert warning in done.stderr and any(w.startswith(warning) for w in summary["warnings"])
+
+
+def test_the_any_colour_estimator_takes_an_unseen_texture_without_a_warning(tmp_path: Path) -> None:
+    """--perception camera:any-colour loads the second shipped model, trained on flaps of any colour."""
+    out = tmp_path / "camera.json"
+    done = run_cli(
+        "evaluate", "--policy", "pretrained", "--task", "lift", "--episodes", "1", "--seeds", "0",
+        "--perception", "camera:any-colour", "--texture", str(TEXTURES / "checker-blue.png"), "--json", str(out),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "WARNING" not in done.stderr
+    summary = json.loads(out.read_text())["summary"]
+    assert summary["perception"] == "camera:any-colour" and summary["warnings"] == []
 
 
 @pytest.mark.parametrize(

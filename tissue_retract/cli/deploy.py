@@ -59,11 +59,17 @@ from policies.resolve import POLICY_NAMES
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from safety.config import MAX_CONTROL_RATE_HZ, MIN_CONTROL_RATE_HZ, load_safety_config
-from tissue_retract.cli._camera import add_perception_argument, add_texture_argument, check_texture, load_perception
+from tissue_retract.cli._camera import (
+    add_perception_argument,
+    add_texture_argument,
+    check_texture,
+    load_perception,
+    texture_warning,
+)
 from tissue_retract.cli._checks import MAX_EPISODES, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments, point_argument
-from tissue_retract.cli._sensing import add_force_sensing_argument
+from tissue_retract.cli._sensing import add_force_sensing_argument, announce
 
 __all__ = ["add_arguments", "run"]
 
@@ -198,7 +204,8 @@ def run(args: argparse.Namespace) -> int:
         endoscope_rig=args.endoscope_rig,
         texture=check_texture(args.texture) if args.texture is not None else None,
     )
-    load_perception(args.perception)  # refused here, before anything connects, if it is not a model
+    # Refused here, before anything connects, if it is not a model.
+    announce(texture_warning(load_perception(args.perception), options.texture))
     report = deploy(options, echo=lambda line: print(line, flush=True))
     for line in report.lines():
         print(line)

@@ -52,7 +52,13 @@ from sim.scene_stream import LiveScene, StreamScene
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success
 from tissue_retract.cli._blind import add_blind_arguments
-from tissue_retract.cli._camera import add_perception_argument, add_texture_argument, load_perception, tissue_params
+from tissue_retract.cli._camera import (
+    add_perception_argument,
+    add_texture_argument,
+    load_perception,
+    texture_warning,
+    tissue_params,
+)
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, int_in
 from tissue_retract.cli._live import add_live_argument
 from tissue_retract.cli._sensing import add_force_sensing_argument, announce
@@ -128,6 +134,8 @@ def run(args: argparse.Namespace) -> int:
     )
     sensing = sensing_warning(env.unwrapped.safety_config, f"{args.force_sensing} force sensing")
     announce(sensing)
+    unseen_texture = texture_warning(estimator, args.texture)
+    announce(unseen_texture)
     if args.blind:
         env = RegisteredTask(env, registration_error_m=args.registration_error_mm / 1000.0)
     if estimator is not None:
@@ -198,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
         blind=args.blind,
         force_sensing=args.force_sensing,
         force_sensing_error_n=env.unwrapped.safety_config.force_sensing_error_n,
-        warnings=[sensing] if sensing else [],
+        warnings=[warning for warning in (sensing, unseen_texture) if warning],
     )
     if args.blind:
         summary["registration_error_mm"] = args.registration_error_mm

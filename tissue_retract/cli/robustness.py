@@ -35,7 +35,13 @@ from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success
 from sim.sweep import EpisodeStore, cap_jobs, file_digest, make_trials, parse_ranges, prepare_output, run_trials
 from sim.sweep.report import summarize, write_report
-from tissue_retract.cli._camera import add_perception_argument, add_texture_argument, check_texture, load_perception
+from tissue_retract.cli._camera import (
+    add_perception_argument,
+    add_texture_argument,
+    check_texture,
+    load_perception,
+    texture_warning,
+)
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, int_in
 from tissue_retract.cli._sensing import add_force_sensing_argument, announce
 from tissue_retract.workers import ROBUSTNESS_WORKER, check_sweep_policy
@@ -160,7 +166,8 @@ def run(args: argparse.Namespace) -> int:
     )
     announce(warning)
     texture = check_texture(args.texture) if args.texture is not None else None
-    load_perception(args.perception)  # refused here, before any worker starts, if it is not a model
+    # Refused here, before any worker starts, if it is not a model.
+    announce(texture_warning(load_perception(args.perception), texture))
     check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
     trials = make_trials(ranges, args.trials, mode=args.mode, seed=args.seed)
     kwargs = {
