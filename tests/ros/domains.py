@@ -4,7 +4,8 @@ A run of the suite draws one base id (from the xdist run's id, which all its wor
 process id without xdist) and splits the 100 usable domains into one block per worker, so two workers of
 one run can never meet on a domain. Within its block a worker's tests pick fixed offsets: 0 is the
 worker's own domain (the ``ros_env`` of every test), the dVRK client's servers take the last
-:data:`CLIENT_SLOTS` (:func:`client_domain_id`) and the fault matrix the ones between
+:data:`CLIENT_SLOTS` (:func:`client_domain_id`), the one before them is for a program that commands an arm
+under a shared node name (:func:`commander_domain_id`) and the fault matrix takes the ones between
 (:func:`fault_domain_id`). No offset wraps onto another kind's: a fault's server can never share the domain
 of a test's own sim-dvrk.
 """
@@ -63,5 +64,15 @@ def fault_domain_id(index: int) -> int:
     Faults run one at a time on a worker, so indices that share a domain (the block has fewer fault domains
     than the matrix has faults and retries) never meet on it.
     """
-    slots = block_size() - CLIENT_SLOTS - 1
+    slots = block_size() - CLIENT_SLOTS - 2
     return worker_domain_id(1 + index % slots)
+
+
+def commander_domain_id() -> int:
+    """The domain of a test whose program commands an arm under a node name others share (``bench ros``'s
+    ``/psm1_client``).
+
+    Such a node can stay in the DDS graph for a while after its process ends. On the worker's own domain a
+    later deploy would then see it as another commander of the arm, and hold (measured once in a full run).
+    """
+    return worker_domain_id(block_size() - CLIENT_SLOTS - 1)

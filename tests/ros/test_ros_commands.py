@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from domains import commander_domain_id
+
 
 def _cli(env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
@@ -29,7 +31,8 @@ def test_sim_dvrk_unknown_task_is_refused(ros_env: dict[str, str]) -> None:
 def test_bench_ros_prints_latency_and_drops(ros_env: dict[str, str], tmp_path: Path) -> None:
     """bench ros prints p50/p99 and drops per rate and writes them as JSON (numbers are not asserted)."""
     out = tmp_path / "bench.json"
-    result = _cli(ros_env, "bench", "ros", "--rates", "100", "--duration", "0.5", "--json", str(out))
+    env = {**ros_env, "ROS_DOMAIN_ID": str(commander_domain_id())}  # its /psm1_client must not outlive it here
+    result = _cli(env, "bench", "ros", "--rates", "100", "--duration", "0.5", "--json", str(out))
     assert result.returncode == 0, result.stderr
     assert "p50" in result.stdout and "p99" in result.stdout and "drops" in result.stdout
     report = json.loads(out.read_text())
