@@ -417,22 +417,25 @@ def _hold(report: DeployReport, recorder: Recorder, fault: HoldError) -> None:
     recorder.write("/deploy/event", {"kind": "hold", "text": str(fault), "fault": fault.kind, "data": fault.data})
 
 
-def _to_start(client: Any, start_q: np.ndarray, options: DeployOptions, episode: int, echo: Any) -> None:
-    """Before an episode: the arm at the episode's start, sent back there if it is not (held in a dry run)."""
+def _to_start(
+    client: Any, start_q: np.ndarray, start_jaw: float, options: DeployOptions, episode: int, echo: Any
+) -> None:
+    """Before an episode: the arm and jaw at the episode's start, sent back there if not (held in a dry run)."""
     reason = client.wait_ready(options.wait_s)  # where an arm is matters once it is ready to be commanded
     if reason:
         fault = _deadman_hold(reason)
         fault.data.update(episode=episode)
         raise fault
-    offset = start_offset(client.measure().q, start_q)
+    measured = client.measure()
+    offset = start_offset(measured.q, start_q, measured_jaw=measured.jaw, start_jaw=start_jaw)
     if not offset:
         return
     if options.dry_run:
         raise HoldError("not at start", f"episode {episode}: {offset} (a dry run moves nothing: move it there first)")
     _require_exclusive(client, f"episode {episode}: before the move to its start")
-    echo(f"episode {episode}: {offset}; moving the arm back (move_jp)")
+    echo(f"episode {episode}: {offset}; moving the arm back (move_jp, jaw/move_jp)")
     try:
-        reason = return_to_start(client, start_q, options.wait_s)
+        reason = return_to_start(client, start_q, options.wait_s, start_jaw=start_jaw)
     except DvrkError as e:
         reason = str(e)
     if reason:
@@ -675,7 +678,7 @@ def _deploy_dvrk(
                         client.home(options.wait_s)  # back to the task's start joints
                     except DvrkError as e:
                         raise HoldError("not ready", f"episode {episode}: {e}") from None
-                _to_start(client, view.model.home(), options, episode, echo)
+                _to_start(client, view.model.home(), view.config.jaw_open_rad, options, episode, echo)
                 if not listener.wait(options.wait_s):
                     awaited = f"task topics /{options.arm}/task/site and goal"
                     if options.perception is not None:
@@ -697,8 +700,11 @@ def _deploy_dvrk(
                     echo(f"episode {episode}: site seen at {format_point(seen)}")
                 # The arm must be ENABLED, homed, idle and valid before the first command of an episode.
                 reason = client.wait_ready(options.wait_s, after_s=after)
-                offset = "" if reason else start_offset(client.measure().q, view.model.home())
-                if reason or offset:
+                measured, start_jaw = client.measure(), view.config.jaw_open_rad
+                offset = reason or start_offset(
+                    measured.q, view.model.home(), measured_jaw=measured.jaw, start_jaw=start_jaw
+                )
+                if offset:
                     fault = _deadman_hold(reason) if reason else HoldError("not at start", offset)
                     fault.data.update(episode=episode, seed=seed)
                     raise fault

@@ -129,10 +129,10 @@ class PsmClient(Node):
         self.create_subscription(String, t("error"), self._on_error, event)
         self.listen_only = listen_only
         publishers: dict[str, Publisher | None] = dict.fromkeys(
-            ("servo_jp", "servo_cp", "move_jp", "move_cp", "jaw/servo_jp", "state_command")
+            ("servo_jp", "servo_cp", "move_jp", "move_cp", "jaw/servo_jp", "jaw/move_jp", "state_command")
         )
         if not listen_only:
-            for name in ("servo_jp", "move_jp", "jaw/servo_jp"):
+            for name in ("servo_jp", "move_jp", "jaw/servo_jp", "jaw/move_jp"):
                 publishers[name] = self.create_publisher(JointState, t(name), state)
             for name in ("servo_cp", "move_cp"):
                 publishers[name] = self.create_publisher(PoseStamped, t(name), state)
@@ -500,6 +500,12 @@ class PsmClient(Node):
     def move_jp(self, q: np.ndarray) -> None:
         """Send a joint goal the arm reaches with its own trajectory (not guarded: the arm plans it)."""
         self._command_publisher("move_jp").publish(convert.joint_state(JOINT_NAMES, q, stamp_s=self._now_s()))
+
+    def jaw_move_jp(self, jaw: float) -> None:
+        """Send a jaw angle goal [rad] the console reaches with its own trajectory (not guarded, as ``move_jp``)."""
+        self._command_publisher("jaw/move_jp").publish(
+            convert.joint_state((JAW_JOINT_NAME,), [jaw], stamp_s=self._now_s())
+        )
 
     def jaw_servo_jp(self, jaw: float) -> None:
         """Send a jaw angle set-point [rad]."""
