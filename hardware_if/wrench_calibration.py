@@ -1,71 +1,135 @@
-"""A calibration of the dVRK's force sensing: the efforts the console does not model, fitted and removed.
+"""A calibration of the dVRK's force sensing: the arm's own efforts, identified in free space and removed.
 
-With no tissue in the jaws every joint effort the console reports is error: the instrument's uncompensated
-gravity, Coulomb and viscous friction, an offset. They are linear in a handful of parameters, so a short
-trajectory in free space identifies them by least squares (the identification literature's approach:
-Wang et al. 2019, arXiv 1902.10875), and the residual on a held-out trajectory is what the calibrated
-force can still be off by: the safety filter's error bound (:mod:`safety.force_bound`).
+With nothing touching the instrument every joint effort the console reports is error: the links' and the
+instrument's gravity against the counterweight, their inertia, friction and offsets. Real PSMs' logs show
+all of them (the console's estimate is off by 9 N RMS on a fast excitation, most of it inertia and link
+gravity), and they are linear in parameters (:class:`psm_control.effort_model.EffortRegressor`:
+Pinocchio's joint torque regressor for the rigid body, plus friction and offsets per joint). So a free-space
+log identifies them by least squares, each joint's rows weighed by the spread of its efforts (newtons on
+the insertion, newton-metres elsewhere), on the columns the log can identify
+(:func:`~psm_control.effort_model.independent_columns`).
 
-The regressor, per sample (six joint rows):
+Accelerations come from the logged velocities, filtered forwards and backwards (a second-order Butterworth at
+:data:`CUTOFF_HZ`, no lag) and differentiated; the filtered velocities feed the friction terms too.
 
-* gravity of an unknown mass on the shaft, at an unknown distance behind the tip, under an unknown gravity
-  direction (the arm's mounting): with ``s`` the shaft's direction (the insertion column of the tip's
-  Jacobian) and ``w_i`` the outer joints' angular columns, six columns ``(m g_k)`` and ``(m c g_k)`` for
-  the three axes ``k`` of the arm's frame;
-* per joint: Coulomb friction ``tanh(qd / 0.01)``, viscous friction ``qd`` and a constant offset.
-
-The cables' hysteresis, the offsets' drift and the current noise are not modelled: they remain, and the
-held-out error shows them.
+The residual on a held-out log is what the calibrated force can still be off by: its largest at the speeds a
+retraction reaches (:data:`RETRACTION_TIP_SPEED_M_S`), times 1.25, is
+:attr:`WrenchCalibration.error_bound_with_acceleration_n`. A deploy takes the force from single
+``measured_js`` messages, without an acceleration, and the arm's inertia is large: on the public logs'
+PSM, the chain's acceleration limits (10 rad/s^2 on the outer joints, 1 m/s^2 on the insertion) reflect to
+tens of newtons at the tip. So the bound the filter uses, :attr:`WrenchCalibration.error_bound_n`, adds the
+largest tip force the fitted inertia gives at the chain's acceleration limits over the held-out poses.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.signal import butter, filtfilt
 
+from hardware_if.joint_logs import JointLog
+from psm_control.effort_model import EffortRegressor, independent_columns
 from psm_control.errors import ConfigurationError
-from psm_control.robot import PsmConfiguration
+from psm_control.robot import PsmConfiguration, PsmModel
+from safety.config import SafetyConfig
 from sim.force_sensing import console_force
 
-__all__ = ["WrenchCalibration", "fit_calibration", "read_calibration", "regressor"]
+__all__ = [
+    "CUTOFF_HZ",
+    "DEPTH_BINS_M",
+    "RETRACTION_TIP_SPEED_M_S",
+    "SPEED_BINS_M_S",
+    "FreeSpaceError",
+    "PreparedLog",
+    "WrenchCalibration",
+    "check_calibration",
+    "fit_calibration",
+    "inertia_allowance_n",
+    "prepare_log",
+    "read_calibration",
+]
 
-_COULOMB_SPEED = 0.01
-#: The calibration's error bound over its largest held-out error: the held-out trajectory is short, and
-#: the drift it did not see moves on.
+#: Cut-off of the zero-phase filter on logged velocities [Hz] (WPI's identification filtered at 5.4 Hz).
+CUTOFF_HZ = 4.0
+#: The calibration's error bound over its largest held-out error at retraction speeds.
 _BOUND_MARGIN = 1.25
-_GRAVITY_COLUMNS = 6
-_PER_JOINT = 3
+#: Tool-tip speed up to which a retraction moves [m/s]. A full policy action moves the tip 5 mm along each
+#: axis (``SafetyConfig.max_step_m``) per 10 Hz policy step: at most sqrt(3) x 0.05 = 0.087 m/s, below this.
+#: The public excitation logs run at 0.25-0.42 m/s; only their samples up to this speed set the bound.
+RETRACTION_TIP_SPEED_M_S = 0.1
+#: Insertion-depth bins of the free-space error [m] and tip-speed bins [m/s].
+DEPTH_BINS_M = (0.0, 0.08, 0.11, 0.14, 0.17, 0.20, 0.30)
+SPEED_BINS_M_S = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, math.inf)
+
+_REGRESSOR: EffortRegressor | None = None
 
 
-def regressor(jacobian: np.ndarray, insertion_m: float, qd: np.ndarray) -> np.ndarray:
-    """The (6, 6 + 18) regressor of one sample: efforts = ``regressor @ parameters`` (see the module notes).
+def _regressor() -> EffortRegressor:
+    global _REGRESSOR  # one Pinocchio model and data for every calibration of the process
+    if _REGRESSOR is None:
+        _REGRESSOR = EffortRegressor()
+    return _REGRESSOR
 
-    Args:
-        jacobian: The tool tip's 6x6 Jacobian in the frame the efforts' gravity is expressed in.
-        insertion_m: The insertion joint [m].
-        qd: Joint velocities (6,).
+
+@dataclass(frozen=True)
+class PreparedLog:
+    """A joint log with what the fit and the check need, per sample.
+
+    Attributes:
+        log: The log.
+        qd: Filtered velocities (N, 6).
+        qdd: Accelerations (N, 6).
+        projector: The console's ``pinv(J^T)`` force rows (N, 3, 6).
+        insertion_m: Insertion depth (N,) [m].
+        tip_speed_m_s: Tool-tip speed (N,) [m/s].
+        rows: The regressor (N, 6, columns), with and without accelerations (``rows_static``).
     """
-    shaft = jacobian[:3, 2]
-    rows = np.zeros((6, _GRAVITY_COLUMNS + _PER_JOINT * 6))
-    for k in range(3):
-        axis = np.zeros(3)
-        axis[k] = 1.0
-        for joint in (0, 1):
-            swing = float(np.cross(jacobian[3:, joint], shaft) @ axis)
-            rows[joint, k] = -insertion_m * swing  # m g_k
-            rows[joint, 3 + k] = swing  # m c g_k
-        rows[2, k] = -float(shaft @ axis)
-    for joint in range(6):
-        base = _GRAVITY_COLUMNS + _PER_JOINT * joint
-        rows[joint, base] = math.tanh(float(qd[joint]) / _COULOMB_SPEED)
-        rows[joint, base + 1] = float(qd[joint])
-        rows[joint, base + 2] = 1.0
-    return rows
+
+    log: JointLog
+    qd: np.ndarray
+    qdd: np.ndarray
+    projector: np.ndarray
+    insertion_m: np.ndarray
+    tip_speed_m_s: np.ndarray
+    rows: np.ndarray
+    rows_static: np.ndarray
+
+    @property
+    def joint_mask(self) -> np.ndarray:
+        """The joints the log carries (6,) (the three-joint logs have no wrist)."""
+        mask = np.zeros(6, dtype=bool)
+        mask[: self.log.joints] = True
+        return mask
+
+
+def prepare_log(log: JointLog, cutoff_hz: float = CUTOFF_HZ) -> PreparedLog:
+    """Filter, differentiate and compute the regressor and the console's projection of every sample."""
+    rate = log.rate_hz
+    b, a = butter(2, min(cutoff_hz, 0.4 * rate) / (rate / 2.0))
+    qd = filtfilt(b, a, log.qd, axis=0)
+    qdd = np.gradient(qd, log.t_s, axis=0)
+    regressor = _regressor()
+    configuration = PsmModel().configuration()
+    projector, speed = np.zeros((len(log.q), 3, 6)), np.zeros(len(log.q))
+    rows, rows_static = [], []
+    zero = np.zeros(6)
+    mask = np.zeros(6)
+    mask[: log.joints] = 1.0
+    for k, q in enumerate(log.q):
+        configuration.update(q)
+        jacobian = configuration.base_jacobian()
+        projector[k] = np.linalg.pinv(jacobian.T, rcond=1e-4)[:3]
+        speed[k] = float(np.linalg.norm(jacobian[:3] @ log.qd[k]))
+        rows.append(regressor.rows(q, qd[k], qdd[k]) * mask[:, None])
+        rows_static.append(regressor.rows(q, qd[k], zero) * mask[:, None])
+    return PreparedLog(log, qd, qdd, projector, log.q[:, 2].copy(), speed, np.stack(rows), np.stack(rows_static))
 
 
 @dataclass(frozen=True)
@@ -74,9 +138,12 @@ class WrenchCalibration:
 
     Attributes:
         arm: The arm it was fitted on.
-        parameters: The regressor's parameters (24,).
-        error_bound_n: What the calibrated force may still be off by [N]: the largest held-out free-space
-            error times 1.25.
+        columns: The regressor's columns it identified (:class:`~psm_control.effort_model.EffortRegressor`).
+        parameters: Their values.
+        error_bound_n: What the calibrated force may still be off by without an acceleration (a deploy's) [N]:
+            1.25 x (the largest held-out free-space error at retraction speeds + the inertia allowance).
+        error_bound_with_acceleration_n: ... with the acceleration known [N]: 1.25 x the largest held-out
+            free-space error at retraction speeds.
         rms_before_n: Held-out free-space force error of the console's estimate, RMS [N].
         max_before_n: ... and its largest [N].
         rms_after_n: Held-out free-space force error after the calibration, RMS [N].
@@ -85,67 +152,192 @@ class WrenchCalibration:
     """
 
     arm: str
+    columns: tuple[int, ...]
     parameters: tuple[float, ...]
     error_bound_n: float
+    error_bound_with_acceleration_n: float
     rms_before_n: float
     max_before_n: float
     rms_after_n: float
     max_after_n: float
     samples: int
 
-    def model_efforts(self, jacobian: np.ndarray, insertion_m: float, qd: np.ndarray) -> np.ndarray:
-        """The efforts the calibration attributes to gravity, friction and offsets (6,)."""
-        return np.asarray(regressor(jacobian, insertion_m, qd) @ np.asarray(self.parameters))
+    def _vector(self) -> np.ndarray:
+        full = np.zeros(_regressor().columns)
+        full[list(self.columns)] = self.parameters
+        return full
 
-    def force(self, configuration: PsmConfiguration, qd: np.ndarray, efforts: np.ndarray) -> np.ndarray:
+    def model_efforts(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray | None = None) -> np.ndarray:
+        """The efforts the calibration attributes to the arm itself (6,); no acceleration: its inertia left out."""
+        qdd = np.zeros(6) if qdd is None else np.asarray(qdd, dtype=float)
+        return np.asarray(
+            _regressor().rows(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), qdd) @ self._vector()
+        )
+
+    def force(
+        self, configuration: PsmConfiguration, qd: np.ndarray, efforts: np.ndarray, qdd: np.ndarray | None = None
+    ) -> np.ndarray:
         """The calibrated force on the tool (3,) [N], in the configuration's base axes."""
-        jacobian = configuration.base_jacobian()
-        residual = np.asarray(efforts, dtype=float) - self.model_efforts(jacobian, configuration.insertion_m, qd)
-        return console_force(jacobian, residual)
+        residual = np.asarray(efforts, dtype=float) - self.model_efforts(configuration.q, qd, qdd)
+        return console_force(configuration.base_jacobian(), residual)
 
     def write(self, path: Path) -> None:
         """Write the calibration as JSON."""
         path.write_text(json.dumps({"kind": "wrench_calibration", **asdict(self)}, indent=2) + "\n")
 
 
-def fit_calibration(
-    arm: str,
-    fit: list[tuple[np.ndarray, float, np.ndarray, np.ndarray]],
-    held_out: list[tuple[np.ndarray, float, np.ndarray, np.ndarray]],
-) -> WrenchCalibration:
-    """Fit on free-space samples and check on others.
+@dataclass(frozen=True)
+class FreeSpaceError:
+    """The free-space force error of the console's estimate and of a calibration on some logs.
 
-    Args:
-        arm: The arm's name.
-        fit: ``(jacobian, insertion_m, qd, efforts)`` per sample, no tissue held.
-        held_out: Samples of another trajectory, the same way.
+    Attributes:
+        before_n: The console's error per sample (N,) [N].
+        after_n: The calibrated error per sample, accelerations from the log (N,) [N].
+        after_live_n: ... without accelerations, as a deploy computes it (N,) [N].
+        insertion_m: Insertion depth per sample [m].
+        tip_speed_m_s: Tool-tip speed per sample [m/s].
+    """
+
+    before_n: np.ndarray
+    after_n: np.ndarray
+    after_live_n: np.ndarray
+    insertion_m: np.ndarray
+    tip_speed_m_s: np.ndarray
+
+    @staticmethod
+    def _rms(values: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(np.square(values)))) if len(values) else math.nan
+
+    def retraction_max_n(self) -> float:
+        """The largest calibrated error (accelerations from the log) at retraction speeds [N]."""
+        slow = self.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S
+        if not np.any(slow):
+            slow = np.ones_like(slow)  # a log with no slow samples: its whole error
+        return float(self.after_n[slow].max())
+
+    def _bins(self, values: np.ndarray, edges: Sequence[float], key: str) -> list[dict[str, Any]]:
+        out = []
+        for low, high in itertools.pairwise(edges):
+            inside = (values >= low) & (values < high)
+            if not np.any(inside):
+                continue
+            out.append(
+                {
+                    key: [low, high if math.isfinite(high) else None],
+                    "samples": int(inside.sum()),
+                    "rms_before_n": self._rms(self.before_n[inside]),
+                    "max_before_n": float(self.before_n[inside].max()),
+                    "rms_after_n": self._rms(self.after_n[inside]),
+                    "max_after_n": float(self.after_n[inside].max()),
+                }
+            )
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """Overall and binned figures (the ``--check --json`` file)."""
+        return {
+            "samples": len(self.before_n),
+            "rms_before_n": self._rms(self.before_n),
+            "max_before_n": float(self.before_n.max()),
+            "rms_after_n": self._rms(self.after_n),
+            "max_after_n": float(self.after_n.max()),
+            "rms_after_without_acceleration_n": self._rms(self.after_live_n),
+            "max_after_retraction_speed_n": self.retraction_max_n(),
+            "retraction_tip_speed_m_s": RETRACTION_TIP_SPEED_M_S,
+            "by_depth": self._bins(self.insertion_m, DEPTH_BINS_M, "insertion_m"),
+            "by_speed": self._bins(self.tip_speed_m_s, SPEED_BINS_M_S, "tip_speed_m_s"),
+        }
+
+
+def _free_space_error(parameters: np.ndarray, logs: Sequence[PreparedLog]) -> FreeSpaceError:
+    before: list[np.ndarray] = []
+    after: list[np.ndarray] = []
+    live: list[np.ndarray] = []
+    for p in logs:
+        effort = p.log.effort * p.joint_mask
+        before.append(np.linalg.norm(np.einsum("kij,kj->ki", p.projector, effort), axis=1))
+        for rows, out in ((p.rows, after), (p.rows_static, live)):
+            residual = effort - rows @ parameters
+            out.append(np.linalg.norm(np.einsum("kij,kj->ki", p.projector, residual), axis=1))
+    return FreeSpaceError(
+        np.concatenate(before),
+        np.concatenate(after),
+        np.concatenate(live),
+        np.concatenate([p.insertion_m for p in logs]),
+        np.concatenate([p.tip_speed_m_s for p in logs]),
+    )
+
+
+def check_calibration(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) -> FreeSpaceError:
+    """The free-space error of the console's estimate and of ``calibration`` on ``logs``."""
+    return _free_space_error(calibration._vector(), logs)
+
+
+def inertia_allowance_n(
+    parameters: np.ndarray, logs: Sequence[PreparedLog], accelerations: np.ndarray | None = None, every: int = 20
+) -> float:
+    """The largest tip force the fitted inertia gives at the chain's acceleration limits, over the logs' poses [N].
+
+    The inertial efforts are linear in the accelerations, so the largest over the box of accelerations is at
+    one of its 64 corners.
+    """
+    limits = SafetyConfig().acceleration if accelerations is None else np.asarray(accelerations, dtype=float)
+    corners = np.array(np.meshgrid(*[[-1.0, 1.0]] * 6, indexing="ij")).reshape(6, -1) * limits[:, None]
+    regressor, zero, worst = _regressor(), np.zeros(6), 0.0
+    for p in logs:
+        for k in range(0, len(p.log.q), every):
+            q = p.log.q[k]
+            rest = regressor.rows(q, zero, zero) @ parameters
+            columns = np.column_stack([regressor.rows(q, zero, np.eye(6)[j]) @ parameters - rest for j in range(6)])
+            worst = max(worst, float(np.linalg.norm(p.projector[k] @ columns @ corners, axis=0).max()))
+    return worst
+
+
+def fit_calibration(
+    arm: str, fit: Sequence[PreparedLog], held_out: Sequence[PreparedLog]
+) -> tuple[WrenchCalibration, FreeSpaceError]:
+    """Fit on free-space logs and check on others (see the module notes).
+
+    Returns:
+        The calibration and its free-space error on ``held_out``.
 
     Raises:
-        ConfigurationError: Too few samples to fit the parameters.
+        ConfigurationError: Too few samples to fit, or nothing held out.
     """
-    columns = _GRAVITY_COLUMNS + _PER_JOINT * 6
-    if len(fit) * 6 < 4 * columns or not held_out:
-        raise ConfigurationError("samples", len(fit), f"at least {4 * columns // 6} to fit and some held out")
-    Y = np.vstack([regressor(J, ins, qd) for J, ins, qd, _ in fit])
-    tau = np.concatenate([np.asarray(e, dtype=float) for *_, e in fit])
-    # Each joint's rows weighed by its efforts' spread: newtons on the insertion and newton-metres elsewhere.
-    scale = np.tile(1.0 / np.maximum(np.std(tau.reshape(-1, 6), axis=0), 1e-6), len(fit))
-    parameters, *_ = np.linalg.lstsq(Y * scale[:, None], tau * scale, rcond=None)
-    before, after = [], []
-    for J, ins, qd, efforts in held_out:
-        model = regressor(J, ins, qd) @ parameters
-        before.append(float(np.linalg.norm(console_force(J, np.asarray(efforts)))))
-        after.append(float(np.linalg.norm(console_force(J, np.asarray(efforts) - model))))
-    return WrenchCalibration(
-        arm=arm,
-        parameters=tuple(float(p) for p in parameters),
-        error_bound_n=_BOUND_MARGIN * max(after),
-        rms_before_n=float(np.sqrt(np.mean(np.square(before)))),
-        max_before_n=max(before),
-        rms_after_n=float(np.sqrt(np.mean(np.square(after)))),
-        max_after_n=max(after),
-        samples=len(fit),
+    samples = sum(len(p.log.t_s) for p in fit)
+    if not held_out:
+        raise ConfigurationError("held_out", 0, "at least one log to check the fit on")
+    weights = []
+    for p in fit:
+        spread = np.std(p.log.effort, axis=0)
+        weights.append(np.where(p.joint_mask, 1.0 / np.maximum(spread, 1e-3), 0.0))
+    design = np.concatenate(
+        [(p.rows * w[None, :, None]).reshape(-1, p.rows.shape[2]) for p, w in zip(fit, weights, strict=True)]
     )
+    target = np.concatenate([(p.log.effort * w).reshape(-1) for p, w in zip(fit, weights, strict=True)])
+    columns = independent_columns(design)
+    if len(target) < 4 * len(columns):
+        raise ConfigurationError(
+            "samples", samples, f"at least {4 * len(columns) // 6} to fit {len(columns)} parameters"
+        )
+    values, *_ = np.linalg.lstsq(design[:, columns], target, rcond=None)
+    parameters = np.zeros(design.shape[1])
+    parameters[columns] = values
+    error = _free_space_error(parameters, held_out)
+    slow = error.retraction_max_n()
+    calibration = WrenchCalibration(
+        arm=arm,
+        columns=tuple(int(c) for c in columns),
+        parameters=tuple(float(v) for v in values),
+        error_bound_n=_BOUND_MARGIN * (slow + inertia_allowance_n(parameters, held_out)),
+        error_bound_with_acceleration_n=_BOUND_MARGIN * slow,
+        rms_before_n=FreeSpaceError._rms(error.before_n),
+        max_before_n=float(error.before_n.max()),
+        rms_after_n=FreeSpaceError._rms(error.after_n),
+        max_after_n=float(error.after_n.max()),
+        samples=samples,
+    )
+    return calibration, error
 
 
 def read_calibration(path: str | Path) -> WrenchCalibration:
@@ -158,23 +350,35 @@ def read_calibration(path: str | Path) -> WrenchCalibration:
         data: Any = json.loads(Path(path).read_text())
     except (OSError, ValueError) as e:
         raise ConfigurationError("--wrench-calibration", str(path), f"a JSON file calibrate-wrench wrote ({e})") from e
-    columns = _GRAVITY_COLUMNS + _PER_JOINT * 6
     try:
         if data.get("kind") != "wrench_calibration":
             raise ValueError("not a wrench calibration")
         calibration = WrenchCalibration(
             arm=str(data["arm"]),
+            columns=tuple(int(c) for c in data["columns"]),
             parameters=tuple(float(p) for p in data["parameters"]),
             **{
                 k: float(data[k])
-                for k in ("error_bound_n", "rms_before_n", "max_before_n", "rms_after_n", "max_after_n")
+                for k in (
+                    "error_bound_n",
+                    "error_bound_with_acceleration_n",
+                    "rms_before_n",
+                    "max_before_n",
+                    "rms_after_n",
+                    "max_after_n",
+                )
             },
             samples=int(data["samples"]),
         )
     except (AttributeError, KeyError, TypeError, ValueError) as e:
-        raise ConfigurationError("--wrench-calibration", str(path), f"a file calibrate-wrench wrote ({e})") from e
-    if len(calibration.parameters) != columns or not all(map(math.isfinite, calibration.parameters)):
-        raise ConfigurationError("--wrench-calibration", str(path), f"{columns} finite parameters")
+        raise ConfigurationError(
+            "--wrench-calibration", str(path), f"a file this version of calibrate-wrench wrote ({e})"
+        ) from e
+    total = _regressor().columns
+    if len(calibration.parameters) != len(calibration.columns) or not all(0 <= c < total for c in calibration.columns):
+        raise ConfigurationError("--wrench-calibration", str(path), f"one parameter per column, columns 0-{total - 1}")
+    if not all(map(math.isfinite, calibration.parameters)):
+        raise ConfigurationError("--wrench-calibration", str(path), "finite parameters")
     if not (math.isfinite(calibration.error_bound_n) and calibration.error_bound_n >= 0.0):
         raise ConfigurationError("--wrench-calibration", str(path), "a finite, non-negative error_bound_n")
     return calibration

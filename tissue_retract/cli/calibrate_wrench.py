@@ -1,6 +1,16 @@
 """``tissue-retract calibrate-wrench``: fit the dVRK's force-sensing errors in free space, for ``deploy``.
 
-With no tissue in the jaws, the arm is driven through two short excitation trajectories (Lissajous
+Offline, from logs (:mod:`hardware_if.joint_logs`: rosbag2 bags of ``/<ARM>/measured_js``, this project's
+recordings, the public WPI and radiang CSV layouts)::
+
+    tissue-retract calibrate-wrench --from A [B ...] [--held-out C] --out F.json
+    tissue-retract calibrate-wrench --check F.json --from C [--json OUT.json]
+
+The first fits on the ``--from`` logs and checks on ``--held-out`` (default: the last ``--from`` log when there
+are several, else the last third of the one); the second prints the free-space force error of the console's
+estimate and of the calibrated one on the logs, overall and by insertion depth and tool-tip speed.
+
+Live, with no tissue in the jaws, the arm is driven through two short excitation trajectories (Lissajous
 motions of the tool tip with a yaw swing, about where it starts, through the whole control chain: IK,
 safety filter, Ruckig, verifier). The first is fitted (:mod:`hardware_if.wrench_calibration`), the second
 held out: the command prints the free-space force error of the console's estimate and of the calibrated
@@ -13,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import sys
 import time
@@ -22,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from psm_control.commands import CartesianDelta
+from psm_control.errors import ConfigurationError, TissueRetractError
 from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
@@ -48,7 +60,21 @@ _TICKS_PER_TARGET = 10
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
     parser.add_argument("--arm", default="PSM1", help="arm name / topic namespace (default: PSM1)")
-    parser.add_argument("--out", metavar="F.json", required=True, help="where to write the calibration")
+    parser.add_argument("--out", metavar="F.json", help="where to write the calibration (fitting)")
+    parser.add_argument(
+        "--from",
+        dest="logs",
+        nargs="+",
+        metavar="PATH",
+        help="fit (or --check) offline on free-space joint logs: rosbag2 bags (folder, .mcap or .db3) with "
+        "/ARM/measured_js, deploy recordings with efforts, WPI or radiang CSV logs",
+    )
+    parser.add_argument("--held-out", nargs="+", metavar="PATH", help="logs to check the offline fit on")
+    parser.add_argument("--check", metavar="F.json", help="print a calibration's free-space error on the --from logs")
+    parser.add_argument("--json", metavar="OUT.json", help="with --check: write the figures as JSON")
+    parser.add_argument(
+        "--rate", type=float_in(1.0, 10000.0), default=None, help="sample rate of CSV logs [Hz] (default by layout)"
+    )
     parser.add_argument(
         "--duration",
         type=float_in(5.0, 600.0),
@@ -105,9 +131,24 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
         else:
             next_tick = time.monotonic()
         measured = client.measure()
-        local.update(measured.q)
-        samples.append((local.base_jacobian(), local.insertion_m, np.asarray(measured.qd), client.efforts()))
-    return samples
+        samples.append((measured.stamp_s, np.asarray(measured.q), np.asarray(measured.qd), client.efforts()))
+    return _joint_log(samples)
+
+
+def _joint_log(samples: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]) -> Any:
+    """The excitation's samples as a joint log (repeated stamps, a measurement read twice, dropped)."""
+    from hardware_if.joint_logs import JointLog
+
+    kept = [s for i, s in enumerate(samples) if i == 0 or s[0] > samples[i - 1][0]]
+    t_s = np.array([s[0] for s in kept])
+    return JointLog(
+        "calibrate-wrench excitation",
+        "live",
+        t_s - t_s[0],
+        np.array([s[1] for s in kept]),
+        np.array([s[2] for s in kept]),
+        np.array([s[3] for s in kept]),
+    )
 
 
 def _to_start(client: Any, wait_s: float) -> None:
@@ -126,15 +167,106 @@ def _to_start(client: Any, wait_s: float) -> None:
         client.next_measurement(client.measure().stamp_s, wait_s)
 
 
+def _table(summary: dict[str, Any]) -> str:
+    """The binned figures as text: one line per insertion-depth and tip-speed bin."""
+    lines = [
+        f"free-space force error over {summary['samples']} samples: console RMS {summary['rms_before_n']:.2f} N, "
+        f"max {summary['max_before_n']:.2f} N; calibrated RMS {summary['rms_after_n']:.2f} N, "
+        f"max {summary['max_after_n']:.2f} N "
+        f"({summary['rms_before_n'] / max(summary['rms_after_n'], 1e-12):.1f} x lower RMS)",
+        "  without the acceleration (as a deploy computes it): "
+        f"RMS {summary['rms_after_without_acceleration_n']:.2f} N",
+        f"  largest calibrated error at tip speeds <= {summary['retraction_tip_speed_m_s']:g} m/s: "
+        f"{summary['max_after_retraction_speed_n']:.2f} N",
+        "  bin                 samples  console RMS / max  calibrated RMS / max [N]",
+    ]
+    for key, label, unit, scale in (
+        ("by_depth", "insertion_m", "cm", 100.0),
+        ("by_speed", "tip_speed_m_s", "m/s", 1.0),
+    ):
+        for row in summary[key]:
+            low, high = row[label]
+            span = f"{scale * low:g}-{scale * high:g} {unit}" if high is not None else f">= {scale * low:g} {unit}"
+            lines.append(
+                f"  {span:<18} {row['samples']:>8}  {row['rms_before_n']:>6.2f} / {row['max_before_n']:>6.2f}"
+                f"      {row['rms_after_n']:>6.2f} / {row['max_after_n']:>6.2f}"
+            )
+    return "\n".join(lines)
+
+
+def _offline(args: argparse.Namespace) -> int:
+    """Fit on logs or check a calibration on them; 0, or 1 with the reason."""
+    from hardware_if.joint_logs import read_joint_log
+    from hardware_if.wrench_calibration import (
+        check_calibration,
+        fit_calibration,
+        prepare_log,
+        read_calibration,
+    )
+
+    def prepared(paths: list[str]) -> list[Any]:
+        return [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in paths]
+
+    if args.check is not None:
+        calibration = read_calibration(args.check)
+        if args.json:
+            check_output_path(args.json, "--json")
+        summary = check_calibration(calibration, prepared(args.logs)).summary()
+        print(_table(summary))
+        if args.json:
+            Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
+            print(f"written to {args.json}")
+        return 0
+    if args.out is None:
+        raise ConfigurationError("--out", None, "a file to write the calibration to (or --check F.json)")
+    output = check_output_path(args.out, "--out")
+    logs = [read_joint_log(path, arm=args.arm, rate_hz=args.rate) for path in args.logs]
+    if args.held_out:
+        fit, held_out = [prepare_log(log) for log in logs], prepared(args.held_out)
+    elif len(logs) > 1:
+        fit, held_out = [prepare_log(log) for log in logs[:-1]], [prepare_log(logs[-1])]
+    else:
+        log, cut = logs[0], 2 * len(logs[0].t_s) // 3
+        parts = [
+            dataclasses.replace(log, t_s=log.t_s[s], q=log.q[s], qd=log.qd[s], effort=log.effort[s])
+            for s in (slice(0, cut), slice(cut, None))
+        ]
+        fit, held_out = [prepare_log(parts[0])], [prepare_log(parts[1])]
+    calibration, error = fit_calibration(args.arm, fit, held_out)
+    print(f"fitted {len(calibration.parameters)} parameters on {calibration.samples} samples; held out:")
+    print(_table(error.summary()))
+    print(
+        f"error bound for the safety filter: {calibration.error_bound_n:.2f} N without the acceleration "
+        f"(a deploy), {calibration.error_bound_with_acceleration_n:.2f} N with it"
+    )
+    calibration.write(Path(output))
+    print(f"written to {output}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Calibrate, print the held-out errors, write the file; 0, or 1 with the reason."""
+    if args.logs:
+        try:
+            return _offline(args)
+        except TissueRetractError as e:
+            print(f"tissue-retract calibrate-wrench: error: {e}", file=sys.stderr)
+            return 1
+    if args.check is not None:
+        print(
+            "tissue-retract calibrate-wrench: error: --check needs --from PATH (the logs to check on)", file=sys.stderr
+        )
+        return 1
+    if args.out is None:
+        print("tissue-retract calibrate-wrench: error: --out F.json is required", file=sys.stderr)
+        return 1
     output = check_output_path(args.out, "--out")
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
     from hardware_if.errors import DvrkError
     from hardware_if.psm_client import PsmClient
     from hardware_if.session import ros_session
-    from hardware_if.wrench_calibration import fit_calibration
+    from hardware_if.wrench_calibration import fit_calibration, prepare_log
 
     config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)
     chain = ControlChain(config)
@@ -156,14 +288,17 @@ def run(args: argparse.Namespace) -> int:
         except (DvrkError, RuntimeError) as e:
             print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
             return 1
-    calibration = fit_calibration(args.arm, fit, held_out)
+    calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
     print(
-        f"free-space force error on the held-out trajectory ({len(held_out)} samples): "
+        f"free-space force error on the held-out trajectory ({len(held_out.t_s)} samples): "
         f"before RMS {calibration.rms_before_n:.3f} N, max {calibration.max_before_n:.3f} N; "
         f"after RMS {calibration.rms_after_n:.3f} N, max {calibration.max_after_n:.3f} N "
         f"({calibration.rms_before_n / max(calibration.rms_after_n, 1e-12):.1f} x lower RMS)"
     )
-    print(f"error bound for the safety filter: {calibration.error_bound_n:.3f} N")
+    print(
+        f"error bound for the safety filter: {calibration.error_bound_n:.3f} N "
+        f"({calibration.error_bound_with_acceleration_n:.3f} N with the acceleration known)"
+    )
     calibration.write(Path(output))
     print(f"written to {output}")
     return 0
