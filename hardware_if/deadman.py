@@ -70,8 +70,7 @@ class Deadman:
 
     Args:
         timeout_s: Largest allowed age of the latest ``measured_js`` [s]; default the chain's
-            ``SafetyConfig.deadman_timeout_s`` (0.05 s, 5 periods
-            of the dVRK's 100 Hz publication).
+            ``SafetyConfig.deadman_timeout_s`` (0.15 s, 15 periods of the dVRK's 100 Hz publication).
         tracking_tolerance: Largest |measured - setpoint| per joint before tripping; default the dVRK's
             (0.5 rad yaw/pitch, 0.05 m insertion, 0.6 rad roll and wrist).
 

@@ -608,6 +608,11 @@ def _deploy_dvrk(
     config = with_sensing(config, error_n, DEFAULT_RANGES)  # the task flap's ranges: the tissue assumed
     # Said before anything reaches the arm: a limit the robot's force sensing cannot tell.
     _warn_sensing(config, options.force_sensing_source, recorder, echo)
+    configured = "the default" if options.safety_config is None else "from the safety configuration"
+    echo(
+        f"deadman: the arm holds when measured_js is older than {config.deadman_timeout_s:g} s "
+        f"(deadman_timeout_s, {configured})"
+    )
 
     with ros_session(signal_handlers=False):
         # A name of this process's own: another deploy's nodes are then "another commander", never "us".

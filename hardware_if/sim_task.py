@@ -254,6 +254,7 @@ class TaskArm:
 
     def _read_task_state(self) -> dict[str, Any]:
         return {
+            "seed": self.episode_seed,
             "site": np.asarray(self.env.site_position(), dtype=float),
             "goal": np.asarray(self.env.goal, dtype=float),
             "achieved_goal": self._achieved.copy(),
@@ -455,7 +456,8 @@ class TaskTopics:
 class TruthLog:
     """Writes a :class:`TaskArm`'s ground truth as JSON lines, to score a run that could not see it.
 
-    One line per policy period (the task's environment step): ``t`` [s since the log opened], ``grasped``,
+    One line per policy period (the task's environment step): ``t`` [s since the log opened], the episode's
+    ``seed``, ``grasped``,
     ``site``, ``achieved_goal``, ``goal``, ``grasp_point`` [m] in ``<arm>_base`` and ``distance_m`` (achieved
     goal to goal). Each line is flushed as written, so a killed server leaves every line but the last.
 
@@ -476,6 +478,7 @@ class TruthLog:
         state = self.arm_model.task_state()
         line = {
             "t": time.monotonic() - self._start_s,
+            "seed": state["seed"],
             "grasped": state["grasped"],
             **{name: [float(v) for v in state[name]] for name in ("site", "achieved_goal", "goal", "grasp_point")},
             "distance_m": float(np.linalg.norm(state["achieved_goal"] - state["goal"])),

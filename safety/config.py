@@ -189,7 +189,9 @@ class SafetyConfig:
     # 1.2 x the task flap's weight at its largest default size, density, thickness and gravity (0.32 N),
     # rounded up; sim.force_sensing.tissue_bounds.
     held_load_bound_n: float = 0.33
-    deadman_timeout_s: float = 0.05
+    # 15 periods of the dVRK's 100 Hz: above the oldest measured_js a deploy met ticking against sim-dvrk on
+    # a machine busy with robustness --jobs 2 (69 ms; 14 ms idle), docs/dvrk.md "The deadman's timeout".
+    deadman_timeout_s: float = 0.15
     max_translation_m: float = 0.05
     max_yaw_rad: float = 0.5
     solver_eps: float = 1e-4

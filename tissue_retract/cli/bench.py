@@ -17,6 +17,7 @@ TARGETS: dict[str, str] = {
     "env": "environment steps/s (state-only and rendering)",
     "chain": "control-chain tick latency against a naive reference",
     "ros": "servo_jp -> measured_js round trip over loopback ROS 2",
+    "rehearsal": "the shipped policy deployed through ROS against sim-dvrk beside the same policy in-process",
     "faults": "the deploy's fault matrix: fault -> exit status, hold reason, what the recording kept",
     "safety": "the force bound: adversarial and shipped policies x tasks x force presets x tissue stiffness",
     "train": "the default recipe's wall time to a policy confirmed on 100 unseen episodes, per task",
