@@ -23,6 +23,7 @@ largest tip force the fitted inertia gives at the chain's acceleration limits ov
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -34,7 +35,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from hardware_if.joint_logs import JointLog
+from hardware_if.joint_logs import JointLog, JointLogError
 from psm_control.effort_model import EffortRegressor, independent_columns
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmConfiguration, PsmModel
@@ -67,6 +68,8 @@ RETRACTION_TIP_SPEED_M_S = 0.1
 #: Insertion-depth bins of the free-space error [m] and tip-speed bins [m/s].
 DEPTH_BINS_M = (0.0, 0.08, 0.11, 0.14, 0.17, 0.20, 0.30)
 SPEED_BINS_M_S = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, math.inf)
+#: Samples with the tool closer to the RCM are left out [m]: the dVRK's SafeDistanceFromRCM (45 mm).
+MIN_INSERTION_M = 0.045
 
 _REGRESSOR: EffortRegressor | None = None
 
@@ -129,7 +132,22 @@ def prepare_log(log: JointLog, cutoff_hz: float = CUTOFF_HZ) -> PreparedLog:
         speed[k] = float(np.linalg.norm(jacobian[:3] @ log.qd[k]))
         rows.append(regressor.rows(q, qd[k], qdd[k]) * mask[:, None])
         rows_static.append(regressor.rows(q, qd[k], zero) * mask[:, None])
-    return PreparedLog(log, qd, qdd, projector, log.q[:, 2].copy(), speed, np.stack(rows), np.stack(rows_static))
+    # The console's estimate near the RCM is a pseudo-inverse of a nearly singular Jacobian (thousands of
+    # newtons on the public logs' homing moves), where the dVRK refuses Cartesian control anyway.
+    keep = log.q[:, 2] >= MIN_INSERTION_M
+    if not np.any(keep):
+        raise JointLogError(log.source, f"samples with the insertion at {MIN_INSERTION_M} m or more")
+    kept = dataclasses.replace(log, t_s=log.t_s[keep], q=log.q[keep], qd=log.qd[keep], effort=log.effort[keep])
+    return PreparedLog(
+        kept,
+        qd[keep],
+        qdd[keep],
+        projector[keep],
+        log.q[keep, 2].copy(),
+        speed[keep],
+        np.stack(rows)[keep],
+        np.stack(rows_static)[keep],
+    )
 
 
 @dataclass(frozen=True)
