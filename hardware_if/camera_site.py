@@ -72,6 +72,9 @@ class CameraSite(Node):
 
     #: What a deploy's success is judged by.
     success_source = "estimate (the site the endoscope saw, moved with the jaws)"
+    #: The site is seen once an episode and then moved with the jaws: a step waits for no new image (the
+    #: endoscope's 10 Hz would stretch every 50 ms policy step to the next frame).
+    state_each_period = False
 
     def __init__(
         self,

@@ -787,8 +787,8 @@ def _dvrk_episode(
     step_end = time.monotonic()
     try:
         for step in range(steps_total):
-            if step:  # the task state the arm's last commands produced, not an older one (up to one period late)
-                view.listener.wait(4 * chain.control_period_s, after_s=step_end)
+            if step and view.listener.state_each_period:  # the task state the arm's last commands produced
+                view.listener.wait(4 * chain.control_period_s, after_s=step_end)  # (up to one period late)
             observation = view.observation()
             try:
                 action = np.clip(policy(observation), -1.0, 1.0)

@@ -49,6 +49,8 @@ class TaskListener(Node):
 
     #: What a deploy's success is judged by.
     success_source = "task topics"
+    #: The state comes anew every period (the deploy waits for the one its last commands produced).
+    state_each_period = True
 
     def __init__(self, arm: str, *, listen_only: bool = False) -> None:
         super().__init__(f"{arm.lower()}_task_listener_{time.monotonic_ns() % 100000}")
@@ -177,6 +179,8 @@ class RegisteredSite:
 
     #: What a deploy's success is judged by: an estimate, not a measurement of the tissue.
     success_source = "estimate (the registered site moved with the jaws)"
+    #: The state is the registration moved with the jaws: nothing to wait for between steps.
+    state_each_period = False
 
     def __init__(self, estimate: TaskEstimate, client: PsmClient) -> None:
         self.estimate, self.client = estimate, client

@@ -11,7 +11,8 @@ same seeds with the force the console senses (``--force-sensing dvrk``, as ``sim
 - ``blind``: ``sim-dvrk --task T --blind`` and ``deploy --site X Y Z --goal X Y Z`` with the site and goal it
   printed, one console per episode (a registration is of one scene). In-process: ``--blind
   --registration-error-mm 0``.
-- ``camera``: ``sim-dvrk --task T --endoscope`` and ``deploy --perception camera``, one console per episode.
+- ``camera``: ``sim-dvrk --task T --blind --endoscope`` and ``deploy --perception camera``, one console per
+  episode (the camera sees the site; the jaw, stalled on the held flap, tells the grasp).
   In-process: ``--perception camera``.
 
 Every episode is scored on the console's ground truth, not on what the deploy estimated: with task topics,
@@ -263,7 +264,8 @@ def _ros(task: str, mode: str, seeds: Sequence[int], folder: Path, args: argpars
             episodes.append(episode)
     else:
         for seed in seeds:
-            extra = ["--blind"] if mode == "blind" else ["--endoscope"]
+            # A camera sees the site but not the grasp: the jaw tells it, as a real one stalled on tissue (--blind).
+            extra = ["--blind"] if mode == "blind" else ["--blind", "--endoscope"]
             console = _Console(task, seed, folder, extra)
             record = folder / f"{task}-{mode}-{seed}.mcap"
             try:
