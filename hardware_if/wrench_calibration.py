@@ -19,6 +19,12 @@ retraction reaches (:data:`RETRACTION_TIP_SPEED_M_S`), times 1.25, is
 PSM, the chain's acceleration limits (10 rad/s^2 on the outer joints, 1 m/s^2 on the insertion) reflect to
 tens of newtons at the tip. So the bound the filter uses, :attr:`WrenchCalibration.error_bound_n`, adds the
 largest tip force the fitted inertia gives at the chain's acceleration limits over the held-out poses.
+
+The rigid body's dynamic columns (inertia, Coriolis) are kept only where the held-out log supports them:
+a fit without them is made too, and it is the calibration when the dynamic columns lower the held-out error
+by less than :data:`DYNAMICS_GAIN` (an arm whose logs show no inertia; least squares would otherwise fit
+the noise with inertial parameters, and the allowance above would then be that noise at the chain's
+acceleration limits). Its bound is then only as good as the held-out log's accelerations.
 """
 
 from __future__ import annotations
@@ -65,6 +71,8 @@ _BOUND_MARGIN = 1.25
 #: axis (``SafetyConfig.max_step_m``) per 10 Hz policy step: at most sqrt(3) x 0.05 = 0.087 m/s, below this.
 #: The public excitation logs run at 0.25-0.42 m/s; only their samples up to this speed set the bound.
 RETRACTION_TIP_SPEED_M_S = 0.1
+#: Lowest relative drop of the held-out RMS error for which the rigid body's dynamic columns are kept.
+DYNAMICS_GAIN = 0.1
 #: Insertion-depth bins of the free-space error [m] and tip-speed bins [m/s].
 DEPTH_BINS_M = (0.0, 0.08, 0.11, 0.14, 0.17, 0.20, 0.30)
 SPEED_BINS_M_S = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, math.inf)
@@ -311,6 +319,23 @@ def inertia_allowance_n(
     return worst
 
 
+def _solve(design: np.ndarray, target: np.ndarray, samples: int, exclude: int) -> tuple[np.ndarray, np.ndarray]:
+    """Least squares on the identifiable columns from ``exclude`` on: (their indices, the full parameter vector).
+
+    Raises:
+        ConfigurationError: Too few samples for the columns.
+    """
+    columns = exclude + independent_columns(design[:, exclude:])
+    if len(target) < 4 * len(columns):
+        raise ConfigurationError(
+            "samples", samples, f"at least {4 * len(columns) // 6} to fit {len(columns)} parameters"
+        )
+    values, *_ = np.linalg.lstsq(design[:, columns], target, rcond=None)
+    parameters = np.zeros(design.shape[1])
+    parameters[columns] = values
+    return columns, parameters
+
+
 def fit_calibration(
     arm: str, fit: Sequence[PreparedLog], held_out: Sequence[PreparedLog]
 ) -> tuple[WrenchCalibration, FreeSpaceError]:
@@ -333,21 +358,19 @@ def fit_calibration(
         [(p.rows * w[None, :, None]).reshape(-1, p.rows.shape[2]) for p, w in zip(fit, weights, strict=True)]
     )
     target = np.concatenate([(p.log.effort * w).reshape(-1) for p, w in zip(fit, weights, strict=True)])
-    columns = independent_columns(design)
-    if len(target) < 4 * len(columns):
-        raise ConfigurationError(
-            "samples", samples, f"at least {4 * len(columns) // 6} to fit {len(columns)} parameters"
-        )
-    values, *_ = np.linalg.lstsq(design[:, columns], target, rcond=None)
-    parameters = np.zeros(design.shape[1])
-    parameters[columns] = values
+    dynamic = _regressor().friction_start // 4  # the first columns: the rigid body's inertia and Coriolis
+    fits = [_solve(design, target, samples, exclude=0), _solve(design, target, samples, exclude=dynamic)]
+    errors = [FreeSpaceError._rms(_free_space_error(parameters, held_out).after_n) for _, parameters in fits]
+    with_dynamics = not errors[0] > (1.0 - DYNAMICS_GAIN) * errors[1]
+    columns, parameters = fits[0] if with_dynamics else fits[1]
+    values = parameters[columns]
     error = _free_space_error(parameters, held_out)
     slow = error.retraction_max_n()
     calibration = WrenchCalibration(
         arm=arm,
         columns=tuple(int(c) for c in columns),
         parameters=tuple(float(v) for v in values),
-        error_bound_n=_BOUND_MARGIN * (slow + inertia_allowance_n(parameters, held_out)),
+        error_bound_n=_BOUND_MARGIN * (slow + (inertia_allowance_n(parameters, held_out) if with_dynamics else 0.0)),
         error_bound_with_acceleration_n=_BOUND_MARGIN * slow,
         rms_before_n=FreeSpaceError._rms(error.before_n),
         max_before_n=float(error.before_n.max()),
