@@ -33,6 +33,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import dataclasses
+import math
 import os
 import signal
 import sys
@@ -651,7 +652,9 @@ def _deploy_dvrk(
             try:
                 client.wait_for_measurement(options.wait_s)
             except DvrkError as e:
-                raise HoldError("not ready", str(e)) from None
+                reason = client.status.reason  # invalid data is said as the deadman says it, not as "not ready"
+                invalid = reason.startswith("invalid data")
+                raise (_deadman_hold(reason) if invalid else HoldError("not ready", str(e))) from None
             client.settle_graph(options.wait_s)  # the other programs on the domain, not only the console
             freeze_startup_heap()  # before the first command: short collector pauses from here on
             _require_exclusive(client, "before the first command")
@@ -808,11 +811,12 @@ def _dvrk_episode(
                     diverged = "" if options.dry_run else tracking.check(measured.q)
                     output = chain.tick(measured)
                     force = float(np.linalg.norm(measured.force_n))
-                    peak = max(peak, force)
-                    ended = watch.update(measured.force_n, time.monotonic() - started)
-                    if ended is not None:
-                        _account_excursions(report, recorder, [ended.to_event()], episode)
-                    report.peak_force_n = max(report.peak_force_n, force)
+                    if math.isfinite(force):  # a non-finite force is a sensing fault: the deadman holds on it
+                        peak = max(peak, force)
+                        ended = watch.update(measured.force_n, time.monotonic() - started)
+                        if ended is not None:
+                            _account_excursions(report, recorder, [ended.to_event()], episode)
+                        report.peak_force_n = max(report.peak_force_n, force)
                     predicted = None
                     if options.dry_run:
                         predicted = _predicted_force(view, measured, output.command, stiffness)

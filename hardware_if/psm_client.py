@@ -39,6 +39,10 @@ from safety.config import SafetyConfig
 
 __all__ = ["PsmClient"]
 
+#: Largest calibrated force taken as a measurement [N]: a PSM's motors exert a small fraction of it, so a
+#: larger one comes from the calibration, not the tissue, and holds the arm as invalid data.
+CALIBRATED_FORCE_MAX_N = 1e4
+
 #: How often the watchdog looks at the arm [s] (also how often it counts publishers in the graph).
 WATCHDOG_PERIOD_S = 0.02
 #: A state command is re-sent this often while waiting, in case discovery had not matched yet [s].
@@ -433,10 +437,11 @@ class PsmClient(Node):
             return np.asarray(rotation @ self._force_body_n)
         local = self._calibration_configuration
         local.update(convert.joint_state_positions(message))
-        force_local = self._calibration.force(
-            local, convert.joint_state_velocities(message), np.asarray(message.effort)
-        )
-        return np.asarray(rotation @ local.local_pose()[:3, :3].T @ force_local)
+        with np.errstate(all="ignore"):  # a force that overflows is a sensing fault, said by measure()
+            force_local = self._calibration.force(
+                local, convert.joint_state_velocities(message), np.asarray(message.effort)
+            )
+            return np.asarray(rotation @ local.local_pose()[:3, :3].T @ force_local)
 
     # -- Backend ----------------------------------------------------------------------------------
     def measure(self) -> MeasuredState:
@@ -450,11 +455,21 @@ class PsmClient(Node):
             if message is None:
                 raise DvrkTimeoutError(f"a measured_js from {self.topics.arm}", 0.0, self._state.state)
             rotation = self._poses.get("measured_cp", np.eye(4))[:3, :3]
+            force = self._calibrated_force(message, rotation)
+            magnitude = math.hypot(*force.tolist())  # nan for a nan component, inf only past the float range
+            if not magnitude <= CALIBRATED_FORCE_MAX_N:
+                # Finite efforts through a calibration that overflows or has gone wrong: the force the filter
+                # would limit is unknown, a sensing fault like a non-finite measured_cf.
+                self._invalid(
+                    "measured_js effort",
+                    f"the calibrated force {magnitude:.4g} N is no measurement (finite and at most "
+                    f"{CALIBRATED_FORCE_MAX_N:g} N; check the wrench calibration)",
+                )
             return MeasuredState(
                 q=convert.joint_state_positions(message),
                 qd=convert.joint_state_velocities(message),
                 jaw=self._jaw,
-                force_n=self._calibrated_force(message, rotation),
+                force_n=force,
                 stamp_s=convert.time_to_seconds(message.header.stamp),
             )
 
@@ -575,7 +590,10 @@ class PsmClient(Node):
                 if remaining <= 0.0:
                     raise DvrkTimeoutError(f"a measured_js from {self.topics.arm}", timeout_s, self._state.state)
                 self._lock.wait(remaining)
-        return self.measure()
+            measured = self.measure()  # the force through a calibration is checked here (the lock is re-entrant)
+            if self._data_fault:
+                raise DvrkError(f"{self.topics.arm}: {self._data_fault}")
+            return measured
 
     def next_measurement(self, after_stamp_s: float, timeout_s: float) -> MeasuredState:
         """Block until a ``measured_js`` stamped after ``after_stamp_s`` (the arm's clock) arrived; return it.

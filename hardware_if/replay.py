@@ -6,6 +6,7 @@ Needs no ROS: a recording is plain MCAP with JSON channels.
 from __future__ import annotations
 
 import collections
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -81,11 +82,11 @@ class RecordingSummary:
             f"commands: {self.commands} computed, {self.commands_sent} sent",
             f"safety stop ticks: {self.safety_stop_ticks}; holds: {len(self.holds)}"
             + "".join(f"\n  hold: {h}" for h in self.holds),
-            f"peak force: {self.peak_force_n:.3f} N",
+            f"peak force: {_newtons(self.peak_force_n)}",
             f"invalid actions: {self.invalid_actions}",
             f"force limit exceeded: {len(self.force_limit_exceeded)} x"
             + "".join(
-                f"\n  episode {e.get('episode', '?')}: {e['peak_n']:.3f} N against {e['limit_n']:g} N "
+                f"\n  episode {e.get('episode', '?')}: {_newtons(e.get('peak_n'))} against {e['limit_n']:g} N "
                 f"for {e['duration_s']:.3f} s"
                 for e in self.force_limit_exceeded
             ),
@@ -105,9 +106,16 @@ class RecordingSummary:
         for e in self.episodes:
             out.append(
                 f"episode {e.get('episode')}: success={e.get('success')} steps={e.get('steps')} "
-                f"peak force {float(e.get('peak_force_n', 0.0)):.3f} N"
+                f"peak force {_newtons(e.get('peak_force_n', 0.0))}"
             )
         return out
+
+
+def _newtons(value: Any) -> str:
+    """A force for the summary; a recording keeps a non-finite one as null, which reads ``not finite``."""
+    if value is None or not math.isfinite(float(value)):
+        return "not finite"
+    return f"{float(value):.3f} N"
 
 
 def _number(payload: dict[str, Any], key: str) -> float:

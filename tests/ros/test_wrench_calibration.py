@@ -14,7 +14,8 @@ import rclpy
 from ros_process import start_sim_dvrk, stop, wait_until
 
 from hardware_if.psm_client import PsmClient
-from hardware_if.wrench_calibration import read_calibration
+from hardware_if.wrench_calibration import WrenchCalibration, read_calibration
+from psm_control.effort_model import EffortRegressor
 
 
 @pytest.fixture
@@ -81,3 +82,34 @@ def test_calibrate_wrench_needs_an_enabled_arm(ros_env: dict[str, str], tmp_path
     assert "Traceback" not in result.stderr
     assert not (tmp_path / "w.json").exists()
     assert wait_until(lambda: process.poll() is not None, timeout_s=10.0)
+
+
+def test_a_calibration_that_overflows_holds_the_arm_and_replay_reads_the_recording(
+    ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    """Finite but huge parameters give a force that is no measurement: a named hold, nothing sent, a readable run."""
+    offset_column = EffortRegressor().friction_start + 3 * 2 + 2  # the insertion's effort offset
+    calibration = WrenchCalibration("PSM1", (offset_column,), (1e300,), 1.0, 1.0, 1.0, 2.0, 0.1, 0.2, 1000)
+    calibration.write(tmp_path / "wrench.json")
+    (tmp_path / "deadman.toml").write_text("deadman_timeout_s = 0.5\n")  # a loaded machine: see test_deploy.py
+    record = tmp_path / "run.mcap"
+    sim = start_sim_dvrk(ros_env, "--task", "lift")
+    try:
+        command = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", "scripted", "--target", "dvrk"]
+        command += ["--task", "lift", "--task-topics", "--wrench-calibration", str(tmp_path / "wrench.json")]
+        command += ["--safety-config", str(tmp_path / "deadman.toml"), "--record", str(record), "--wait", "60"]
+        command += ["--domain-id", ros_env["ROS_DOMAIN_ID"]]
+        deploy = subprocess.run(command, env=ros_env, capture_output=True, text=True, timeout=300)
+    finally:
+        stop(sim)
+    output = deploy.stdout + deploy.stderr
+    assert deploy.returncode == 4, output
+    assert "HOLD: invalid data: measured_js effort: the calibrated force" in output, output
+    assert "Warning" not in output and "Traceback" not in output, output
+    assert "enable and home" not in output, output  # held before anything reached the console
+    assert "commands: 0 computed, sent 0" in output or "sent 0" in output, output
+    replay = subprocess.run(
+        [sys.executable, "-m", "tissue_retract", "replay", str(record)], capture_output=True, text=True, timeout=120
+    )
+    assert replay.returncode == 0, replay.stdout + replay.stderr
+    assert "hold: invalid data: measured_js effort" in replay.stdout, replay.stdout
