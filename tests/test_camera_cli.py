@@ -81,3 +81,15 @@ def test_deploy_to_the_simulation_with_the_camera_prints_how_far_off_the_site_wa
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "site seen" in done.stdout and "mm off" in done.stdout, done.stdout
+
+
+def test_a_texture_too_wide_is_refused_once(tmp_path: Path) -> None:
+    """A texture over 8192 px a side: one line that says the limit and the image's size once, no repetition."""
+    from PIL import Image
+
+    wide = tmp_path / "wide.png"
+    Image.new("RGB", (8200, 2)).save(wide)
+    done = run_cli("evaluate", "--policy", "scripted", "--task", "lift", "--episodes", "1", "--texture", str(wide))
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "(this is 8200 x 2)" in done.stderr, done.stderr
+    assert done.stderr.count("is not allowed") == 1, done.stderr

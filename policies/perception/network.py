@@ -138,6 +138,24 @@ class SiteEstimator:
         return path
 
 
+def _check_tensors(path: Path, net: SiteNet, tensors: dict[str, torch.Tensor]) -> None:
+    """The file's tensors are the network's, name for name and shape for shape, or a :class:`CheckpointError`."""
+    expected = {name: tuple(t.shape) for name, t in net.state_dict().items()}
+    given = {name: tuple(t.shape) for name, t in tensors.items()}
+    network = f"the network of width {net.width} with {net.keypoints} keypoints the metadata names"
+    missing, extra = sorted(expected.keys() - given.keys()), sorted(given.keys() - expected.keys())
+    if missing or extra:
+        found = f"missing {', '.join(missing[:3])}" if missing else f"unexpected {', '.join(extra[:3])}"
+        raise CheckpointError(path, f"not a site estimator's model file: its tensors are not {network} ({found})")
+    for name, shape in expected.items():
+        if given[name] != shape:
+            raise CheckpointError(
+                path,
+                f"not a site estimator's model file: tensor {name} is {list(given[name])}, expected {list(shape)} "
+                f"for {network}",
+            )
+
+
 def load_estimator(path: str | Path | None = None) -> SiteEstimator:
     """Read a model file (default: the shipped one; a name of :data:`SHIPPED_MODELS`: that shipped one)
     without executing anything from it.
@@ -158,11 +176,18 @@ def load_estimator(path: str | Path | None = None) -> SiteEstimator:
             tensors = {name: handle.get_tensor(name) for name in handle.keys()}  # noqa: SIM118 (not a dict)
     except (SafetensorError, OSError, ValueError) as e:
         raise CheckpointError(path, f"not a safetensors site estimator: {e}") from e
+    if not raw:
+        raise CheckpointError(
+            path,
+            "not a site estimator's model file: a safetensors file without the site_estimator metadata "
+            "train-perception writes",
+        )
     try:
-        meta = json.loads(raw or "")
-        if meta.get("format") != _FORMAT:
-            raise ValueError(f"format is not {_FORMAT!r}")
+        meta = json.loads(raw)
+        if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
+            raise ValueError(f"its site_estimator metadata is not of the format {_FORMAT!r}")
         net = SiteNet(int(meta["width"]), int(meta["keypoints"]))
+        _check_tensors(path, net, tensors)
         net.load_state_dict(tensors)
         fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in meta["endoscope"].items()}
         endoscope = Endoscope(**fields)

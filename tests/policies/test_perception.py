@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from safetensors import safe_open
+from safetensors.torch import save_file
 
 from policies.errors import CheckpointError
 from policies.perception import SHIPPED_MODEL, SHIPPED_MODELS, SiteEstimator, SiteNet, load_estimator, render_frames
@@ -104,3 +107,28 @@ def test_non_finite_weights_are_refused(tmp_path: Path) -> None:
     path = SiteEstimator(net, Endoscope(), np.zeros(9), 0.01, {}).save(tmp_path / "nan.safetensors")
     with pytest.raises(CheckpointError, match="non-finite"):
         load_estimator(path)
+
+
+def test_a_safetensors_file_without_the_estimators_metadata_is_named(tmp_path: Path) -> None:
+    """Tensors without the site_estimator metadata: the error says what is missing, not a JSON parser's words."""
+    path = tmp_path / "plain.safetensors"
+    save_file({"w": torch.zeros(3)}, str(path))
+    with pytest.raises(CheckpointError, match="without the site_estimator metadata") as caught:
+        load_estimator(path)
+    assert "Expecting value" not in str(caught.value)
+
+
+def test_a_model_file_of_another_shape_names_the_tensor_and_both_shapes(tmp_path: Path) -> None:
+    """Metadata for one network, tensors of another: the first mismatched tensor with its shape and the expected one."""
+    path = SiteEstimator(SiteNet(width=8), Endoscope(), np.zeros(9), 0.01, {}).save(tmp_path / "narrow.safetensors")
+    with safe_open(str(path), framework="pt") as handle:
+        metadata = handle.metadata()
+        tensors = {name: handle.get_tensor(name) for name in handle.keys()}  # noqa: SIM118 (not a dict)
+    meta = json.loads(metadata["site_estimator"])
+    meta["width"] = 16  # the file now claims the shipped width
+    save_file(tensors, str(path), metadata={"site_estimator": json.dumps(meta)})
+    with pytest.raises(CheckpointError) as caught:
+        load_estimator(path)
+    message = str(caught.value)
+    assert "tensor features.0.weight is [8, 8, 3, 3], expected [16, 8, 3, 3]" in message, message
+    assert "width 16 with 32 keypoints" in message, message

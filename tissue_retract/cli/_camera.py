@@ -36,6 +36,8 @@ def check_texture(path: str) -> str:
             if max(picture.size) > _MAX_TEXTURE_PX or min(picture.size) < 1:
                 raise InputFileError("--texture", path, f"{allowed} (this is {picture.size[0]} x {picture.size[1]})")
             picture.convert("RGB").load()
+    except InputFileError:
+        raise
     except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as e:
         raise InputFileError("--texture", path, f"{allowed} ({e})") from e
     return str(Path(path).resolve())
