@@ -43,7 +43,8 @@ from scipy.signal import butter, filtfilt
 
 from hardware_if.joint_logs import JointLog, JointLogError
 from psm_control.effort_model import EffortRegressor, independent_columns
-from psm_control.errors import ConfigurationError
+from psm_control.errors import ConfigurationError, InputFileError
+from psm_control.inputs import check_regular_file
 from psm_control.robot import PsmConfiguration, PsmModel
 from safety.config import SafetyConfig
 from sim.force_sensing import console_force
@@ -51,6 +52,8 @@ from sim.force_sensing import console_force
 __all__ = [
     "CUTOFF_HZ",
     "DEPTH_BINS_M",
+    "EXACT_SENSING",
+    "MAX_FILE_BYTES",
     "RETRACTION_TIP_SPEED_M_S",
     "SPEED_BINS_M_S",
     "FreeSpaceError",
@@ -78,6 +81,11 @@ DEPTH_BINS_M = (0.0, 0.08, 0.11, 0.14, 0.17, 0.20, 0.30)
 SPEED_BINS_M_S = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, math.inf)
 #: Samples with the tool closer to the RCM are left out [m]: the dVRK's SafeDistanceFromRCM (45 mm).
 MIN_INSERTION_M = 0.045
+#: Largest calibration file read [bytes] (1 MiB): one holds a few hundred numbers, a few kilobytes.
+MAX_FILE_BYTES = 1024 * 1024
+#: ``sensing`` of a calibration fitted where the console's free-space efforts were all zero: a console that
+#: reports the exact force (``sim-dvrk --wrench ideal``), or one that sends no efforts.
+EXACT_SENSING = "ideal"
 
 _REGRESSOR: EffortRegressor | None = None
 
@@ -175,6 +183,10 @@ class WrenchCalibration:
         rms_after_n: Held-out free-space force error after the calibration, RMS [N].
         max_after_n: ... and its largest [N].
         samples: Samples fitted on.
+        sensing: What it was fitted on: ``measured_js`` (a live console's joint efforts), ``ideal`` (a live
+            console whose free-space efforts were all zero: one that reports the exact force, as
+            ``sim-dvrk --wrench ideal`` does, or sends no efforts), or ``logs: <layouts>`` (offline).
+        console: The console of the arm it was fitted on: ``sim-dvrk``, ``dvrk`` or ``unknown``.
     """
 
     arm: str
@@ -187,6 +199,14 @@ class WrenchCalibration:
     rms_after_n: float
     max_after_n: float
     samples: int
+    sensing: str = "measured_js"
+    console: str = "unknown"
+
+    @property
+    def origin(self) -> str:
+        """Where it was fitted, for a user: ``PSM1 on sim-dvrk, measured_js``."""
+        console = "an unknown console" if self.console == "unknown" else self.console
+        return f"{self.arm} on {console}, {self.sensing}"
 
     def _vector(self) -> np.ndarray:
         full = np.zeros(_regressor().columns)
@@ -381,45 +401,102 @@ def fit_calibration(
     return calibration, error
 
 
-def read_calibration(path: str | Path) -> WrenchCalibration:
-    """Read a calibration file, with a named error for anything that is not one.
+_FIGURES = (
+    "error_bound_n",
+    "error_bound_with_acceleration_n",
+    "rms_before_n",
+    "max_before_n",
+    "rms_after_n",
+    "max_after_n",
+)
+
+
+def read_calibration(path: str | Path, arm: str | None = None, *, exact_console: bool = False) -> WrenchCalibration:
+    """Read a calibration file, with a named error for anything that is not one, or not one to trust.
+
+    Args:
+        path: The file (at most :data:`MAX_FILE_BYTES`).
+        arm: The arm it is for; None: any.
+        exact_console: Whether it is used where the force is exact (a check on logs); False (a console a
+            deploy drives) refuses a calibration fitted on a console that reported the exact force.
 
     Raises:
-        ConfigurationError: Missing, unreadable or not a wrench calibration.
+        ConfigurationError: Missing, too large, unreadable, not a wrench calibration, an older file without
+            the sensing and console it was fitted on, another arm's, a bound below its own held-out error or
+            beyond what the safety filter takes, or fitted on exact forces for a console that is not exact.
     """
+    field = "--wrench-calibration"
+    size = check_regular_file(path, field, max_bytes=2**62).stat().st_size  # a regular file, then its size
+    if size > MAX_FILE_BYTES:
+        raise InputFileError(
+            field, path, f"a file of at most 1 MiB, as calibrate-wrench writes (this one is {size / 2**20:.1f} MiB)"
+        )
     try:
-        data: Any = json.loads(Path(path).read_text())
+        data: Any = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, ValueError) as e:
-        raise ConfigurationError("--wrench-calibration", str(path), f"a JSON file calibrate-wrench wrote ({e})") from e
+        raise InputFileError(field, path, f"a JSON file calibrate-wrench wrote ({e})") from e
     try:
         if data.get("kind") != "wrench_calibration":
             raise ValueError("not a wrench calibration")
+    except (AttributeError, ValueError) as e:
+        raise InputFileError(field, path, f"a file calibrate-wrench wrote ({e})") from e
+    if "sensing" not in data or "console" not in data:
+        raise InputFileError(
+            field,
+            path,
+            "a calibration that records the sensing and the console it was fitted on (this file is from an "
+            "earlier calibrate-wrench: re-run calibrate-wrench)",
+        )
+    try:
         calibration = WrenchCalibration(
             arm=str(data["arm"]),
             columns=tuple(int(c) for c in data["columns"]),
             parameters=tuple(float(p) for p in data["parameters"]),
-            **{
-                k: float(data[k])
-                for k in (
-                    "error_bound_n",
-                    "error_bound_with_acceleration_n",
-                    "rms_before_n",
-                    "max_before_n",
-                    "rms_after_n",
-                    "max_after_n",
-                )
-            },
+            **{k: float(data[k]) for k in _FIGURES},
             samples=int(data["samples"]),
+            sensing=str(data["sensing"]),
+            console=str(data["console"]),
         )
     except (AttributeError, KeyError, TypeError, ValueError) as e:
-        raise ConfigurationError(
-            "--wrench-calibration", str(path), f"a file this version of calibrate-wrench wrote ({e})"
-        ) from e
+        raise InputFileError(field, path, f"a file this version of calibrate-wrench wrote ({e})") from e
+    _check(calibration, str(path), arm, exact_console)
+    return calibration
+
+
+def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_console: bool) -> None:
+    """Refuse a calibration that is not self-consistent, or not for this arm and console (see read_calibration)."""
+    field = "--wrench-calibration"
     total = _regressor().columns
     if len(calibration.parameters) != len(calibration.columns) or not all(0 <= c < total for c in calibration.columns):
-        raise ConfigurationError("--wrench-calibration", str(path), f"one parameter per column, columns 0-{total - 1}")
+        raise InputFileError(field, path, f"one parameter per column, columns 0-{total - 1}")
     if not all(map(math.isfinite, calibration.parameters)):
-        raise ConfigurationError("--wrench-calibration", str(path), "finite parameters")
-    if not (math.isfinite(calibration.error_bound_n) and calibration.error_bound_n >= 0.0):
-        raise ConfigurationError("--wrench-calibration", str(path), "a finite, non-negative error_bound_n")
-    return calibration
+        raise InputFileError(field, path, "finite parameters")
+    for name in _FIGURES:
+        value = getattr(calibration, name)
+        if not (math.isfinite(value) and value >= 0.0):
+            raise InputFileError(field, path, f"a finite, non-negative {name} (this file has {value!r})")
+    if arm is not None and calibration.arm != arm:
+        raise InputFileError(field, path, f"a calibration of {arm} (this one is {calibration.arm}'s)")
+    bound = calibration.error_bound_n
+    try:
+        SafetyConfig(force_sensing_error_n=bound)
+    except ConfigurationError as e:
+        raise InputFileError(
+            field, path, f"an error_bound_n the safety filter takes, {e.allowed} (this file has {bound:g} N)"
+        ) from None
+    for name in ("max_after_n", "error_bound_with_acceleration_n"):
+        if bound < getattr(calibration, name):
+            raise InputFileError(
+                field,
+                path,
+                f"an error_bound_n at least its own {name} (this file has {bound:g} N beside "
+                f"{getattr(calibration, name):g} N: the bound contradicts the fit)",
+            )
+    if calibration.sensing == EXACT_SENSING and not exact_console:
+        raise InputFileError(
+            field,
+            path,
+            "a calibration fitted on the console it is used with (this one was fitted where the console's "
+            "free-space efforts were all zero, as on sim-dvrk --wrench ideal: it trusts the force to "
+            f"{bound:g} N, which holds on no dVRK; re-run calibrate-wrench against this console)",
+        )

@@ -90,6 +90,7 @@ def test_the_command_fits_checks_and_writes_the_bins(known: dict, tmp_path: Path
     out = tmp_path / "wrench.json"
     assert main(["calibrate-wrench", "--from", str(fit), "--held-out", str(held), "--out", str(out)]) == 0
     calibration = read_calibration(out)
+    assert (calibration.sensing, calibration.console) == ("logs: rosbag2", "unknown")  # a bag: any console's
     report = tmp_path / "check.json"
     assert main(["calibrate-wrench", "--check", str(out), "--from", str(held), "--json", str(report)]) == 0
     printed = capsys.readouterr().out

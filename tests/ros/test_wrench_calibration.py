@@ -56,7 +56,9 @@ def test_calibrate_wrench_lowers_the_held_out_error_three_times(
     assert match is not None, result.stdout
     before, after = float(match.group(1)), float(match.group(2))
     assert before >= 3.0 * after, result.stdout
-    calibration = read_calibration(out)
+    calibration = read_calibration(out, "PSM1")
+    assert (calibration.sensing, calibration.console) == ("measured_js", "sim-dvrk"), calibration
+    assert "(fitted on PSM1 on sim-dvrk, measured_js)" in result.stdout, result.stdout
     assert calibration.rms_before_n == pytest.approx(before, abs=1e-3)
     assert 0.0 < calibration.error_bound_n < before
 
@@ -105,6 +107,7 @@ def test_a_calibration_that_overflows_holds_the_arm_and_replay_reads_the_recordi
     output = deploy.stdout + deploy.stderr
     assert deploy.returncode == 4, output
     assert "HOLD: invalid data: measured_js effort: the calibrated force" in output, output
+    assert "(fitted on PSM1 on an unknown console, measured_js); the filter trusts the force to 1 N" in output, output
     assert "Warning" not in output and "Traceback" not in output, output
     assert "enable and home" not in output, output  # held before anything reached the console
     assert "commands: 0 computed, sent 0" in output or "sent 0" in output, output

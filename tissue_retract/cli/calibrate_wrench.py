@@ -55,6 +55,8 @@ _DEADMAN_S = 0.25
 _MAX_HOLDS = 20
 #: A new target for the chain every this many ticks (the policies' 10 Hz at the dVRK's 100 Hz).
 _TICKS_PER_TARGET = 10
+#: Log layouts (:mod:`hardware_if.joint_logs`) recorded on real PSMs: the public WPI and radiang logs.
+_REAL_PSM_LAYOUTS = {"wpi", "radiang"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -151,6 +153,13 @@ def _joint_log(samples: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]) 
     )
 
 
+def _console_kind(consoles: list[str]) -> str:
+    """``sim-dvrk`` when this project's simulated console serves the arm, else ``dvrk`` (``unknown``: none)."""
+    if not consoles or not all(name.startswith("/") for name in consoles):  # none, or not yet named
+        return "unknown"
+    return "sim-dvrk" if all(name.endswith("_sim_dvrk") for name in consoles) else "dvrk"
+
+
 def _to_start(client: Any, wait_s: float) -> None:
     """Move to the excitation's start (the tool 12 cm in, the wrist straight) with the console's move_jp.
 
@@ -208,7 +217,7 @@ def _offline(args: argparse.Namespace) -> int:
         return [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in paths]
 
     if args.check is not None:
-        calibration = read_calibration(args.check)
+        calibration = read_calibration(args.check, exact_console=True)  # checked on logs, not a console
         if args.json:
             check_output_path(args.json, "--json")
         summary = check_calibration(calibration, prepared(args.logs)).summary()
@@ -233,6 +242,10 @@ def _offline(args: argparse.Namespace) -> int:
         ]
         fit, held_out = [prepare_log(parts[0])], [prepare_log(parts[1])]
     calibration, error = fit_calibration(args.arm, fit, held_out)
+    layouts = sorted({p.log.layout for p in fit})
+    # The public CSV layouts are real PSMs' logs; a bag or a recording may come from any console.
+    console = "dvrk" if set(layouts) <= _REAL_PSM_LAYOUTS else "unknown"
+    calibration = dataclasses.replace(calibration, sensing=f"logs: {', '.join(layouts)}", console=console)
     print(f"fitted {len(calibration.parameters)} parameters on {calibration.samples} samples; held out:")
     print(_table(error.summary()))
     print(
@@ -240,7 +253,7 @@ def _offline(args: argparse.Namespace) -> int:
         f"(a deploy), {calibration.error_bound_with_acceleration_n:.2f} N with it"
     )
     calibration.write(Path(output))
-    print(f"written to {output}")
+    print(f"written to {output} (fitted on {calibration.origin})")
     return 0
 
 
@@ -263,10 +276,11 @@ def run(args: argparse.Namespace) -> int:
     output = check_output_path(args.out, "--out")
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
+    from hardware_if.commander_watch import served_by
     from hardware_if.errors import DvrkError
     from hardware_if.psm_client import PsmClient
     from hardware_if.session import ros_session
-    from hardware_if.wrench_calibration import fit_calibration, prepare_log
+    from hardware_if.wrench_calibration import EXACT_SENSING, fit_calibration, prepare_log
 
     config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)
     chain = ControlChain(config)
@@ -285,10 +299,20 @@ def run(args: argparse.Namespace) -> int:
             fit = _trajectory(client, chain, _FREQUENCIES_HZ[0], args.duration, args.wait)
             print(f"{args.arm}: excitation 2 of 2, held out ({args.duration:g} s)", flush=True)
             held_out = _trajectory(client, chain, _FREQUENCIES_HZ[1], args.duration, args.wait)
+            consoles = served_by(client, args.arm)  # by now discovery has brought the console's name
         except (DvrkError, RuntimeError) as e:
             print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
             return 1
     calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
+    exact = not np.any(fit.effort) and not np.any(held_out.effort)
+    calibration = dataclasses.replace(
+        calibration, sensing=EXACT_SENSING if exact else "measured_js", console=_console_kind(consoles)
+    )
+    if exact:
+        print(
+            f"{args.arm}: the console's efforts were all zero in free space: it reports the exact force (or "
+            "sends no efforts); the file says so and a deploy to a dVRK refuses it"
+        )
     print(
         f"free-space force error on the held-out trajectory ({len(held_out.t_s)} samples): "
         f"before RMS {calibration.rms_before_n:.3f} N, max {calibration.max_before_n:.3f} N; "
@@ -300,5 +324,5 @@ def run(args: argparse.Namespace) -> int:
         f"({calibration.error_bound_with_acceleration_n:.3f} N with the acceleration known)"
     )
     calibration.write(Path(output))
-    print(f"written to {output}")
+    print(f"written to {output} (fitted on {calibration.origin})")
     return 0

@@ -59,6 +59,7 @@ from policies.resolve import POLICY_NAMES
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from safety.config import MAX_CONTROL_RATE_HZ, MIN_CONTROL_RATE_HZ, load_safety_config
+from sim.force_sensing import error_bound_n, sensing_params
 from tissue_retract.cli._camera import (
     add_perception_argument,
     add_texture_argument,
@@ -165,11 +166,17 @@ def run(args: argparse.Namespace) -> int:
             )
     elif args.wrench_calibration is not None:
         raise ConfigurationError("--wrench-calibration", args.wrench_calibration, "dvrk only")
-    sensing_error_n, sensing_source = None, "dvrk measured_cf, uncompensated"
+    sensing_error_n, sensing_source, calibration = None, "dvrk measured_cf, uncompensated", None
     if args.wrench_calibration is not None:
-        calibration = read_calibration(args.wrench_calibration)
+        # Refused here, before the recording is opened: another arm's, a bound its own fit contradicts, one
+        # fitted on exact forces (see read_calibration).
+        calibration = read_calibration(args.wrench_calibration, args.arm)
         sensing_error_n = calibration.error_bound_n
-        sensing_source = f"dvrk measured_cf, calibrated by {args.wrench_calibration}"
+        sensing_source = (
+            f"dvrk measured_js efforts, calibrated by {args.wrench_calibration} (fitted on {calibration.origin})"
+        )
+    elif args.target == "dvrk":
+        sensing_error_n = error_bound_n(sensing_params("dvrk"))
 
     safety_config = None
     if args.safety_config is not None:
@@ -198,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
         force_sensing=args.force_sensing,
         force_sensing_error_n=sensing_error_n,
         force_sensing_source=sensing_source,
-        wrench_calibration=calibration if args.wrench_calibration is not None else None,
+        wrench_calibration=calibration,
         perception=args.perception,
         image_timeout_s=args.image_timeout,
         endoscope_rig=args.endoscope_rig,
@@ -206,6 +213,12 @@ def run(args: argparse.Namespace) -> int:
     )
     # Refused here, before anything connects, if it is not a model.
     announce(texture_warning(load_perception(args.perception), options.texture))
+    if args.target == "dvrk":
+        bound = "its error_bound_n" if calibration is not None else "the dvrk model's error bound"
+        print(
+            f"force sensing: {sensing_source}; the filter trusts the force to {sensing_error_n:.3g} N ({bound})",
+            flush=True,
+        )
     report = deploy(options, echo=lambda line: print(line, flush=True))
     for line in report.lines():
         print(line)
