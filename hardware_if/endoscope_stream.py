@@ -14,7 +14,8 @@ in a copy of the episode's scene built from the same seed: the flap's nodes are 
 without gravity shows them, within 0.3 mm) and the arm is posed, then both eyes are drawn under the
 episode's lighting (seeded by the episode seed, the endoscope at its nominal pose) with fresh sensor
 noise. Each image is stamped with the time of the state it shows. Killing that process stops the stream
-and nothing else.
+and nothing else: it ends quietly on SIGINT or SIGTERM (exit status 130 or 143), and the console's process
+says once that the images stopped (:meth:`EndoscopeStream.ended`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 import os
+import signal
 import time
 from multiprocessing.connection import Connection
 from typing import Any, NamedTuple
@@ -81,6 +83,7 @@ class EndoscopeStream:
         self.process = context.Process(target=serve, args=(task, texture, rig, child), name="endoscope", daemon=True)
         self.process.start()
         child.close()
+        self._reported = False
 
     @property
     def pid(self) -> int | None:
@@ -97,8 +100,21 @@ class EndoscopeStream:
         with contextlib.suppress(BrokenPipeError, OSError):  # the render process was stopped: the stream ends
             self._connection.send(state)
 
+    def ended(self) -> str:
+        """Once, after the render process ended on its own (killed, crashed): what to tell the user; else ''."""
+        if self._reported or self.process.is_alive() or self.process.exitcode is None:
+            return ""
+        self._reported = True
+        code = self.process.exitcode
+        how = f"exit status {code}"
+        with contextlib.suppress(ValueError):
+            if code < 0 or code > 128:
+                how = signal.Signals(-code if code < 0 else code - 128).name
+        return f"endoscope: the render process {self.process.pid} ended ({how}): no more images; the console goes on"
+
     def close(self) -> None:
         """Stop the render process."""
+        self._reported = True  # ended by us: nothing to report
         self._connection.close()
         self.process.join(timeout=5.0)
         if self.process.is_alive():
@@ -168,17 +184,39 @@ def _messages(frame: Any, stamp_s: float, rig: str) -> dict[str, Any]:
     return messages
 
 
+class _Stopped(KeyboardInterrupt):
+    """A stop signal reached the render process (the exit status is 128 + ``signum``)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+def _stop(signum: int, _frame: Any) -> None:
+    raise _Stopped(signum)
+
+
 def serve(task: str, texture: str | None, rig: str, connection: Connection) -> None:
-    """The render process: redraw each state received and publish the pair, until the pipe closes."""
+    """The render process: redraw each state received and publish the pair, until the pipe closes or a stop signal.
+
+    Stop signals are its own, not rclpy's: rclpy's shut the context down under the next publish, which then
+    raised an ``RCLError`` and printed its traceback into the console's output.
+    """
     import rclpy  # the ros extra, in this process of its own
+    from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
+    from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import CameraInfo, Image
 
     from hardware_if.crtk import periodic_qos
 
-    mirror = _MirrorScene(task, texture)
-    rclpy.init()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _stop)
+    stopped = 0
+    mirror: _MirrorScene | None = None
     try:
+        mirror = _MirrorScene(task, texture)
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         node = Node(f"endoscope_{os.getpid()}")
         publishers = {
             key: node.create_publisher(Image if key.endswith("image") else CameraInfo, topic, periodic_qos())
@@ -193,9 +231,18 @@ def serve(task: str, texture: str | None, rig: str, connection: Connection) -> N
                 break
             for key, message in _messages(mirror.frame(state), state.stamp_s, rig).items():
                 publishers[key].publish(message)
-    except KeyboardInterrupt:
+    except _Stopped as e:
+        stopped = e.signum
+    except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    finally:
-        mirror.env.close()
+    except RuntimeError:  # rclpy's RCLError: quiet only when the context ended under a publish
         if rclpy.ok():
-            rclpy.shutdown()
+            raise
+    finally:
+        with contextlib.suppress(_Stopped):  # a second signal while it closes
+            if mirror is not None:
+                mirror.env.close()
+            if rclpy.ok():
+                rclpy.shutdown()
+    if stopped:
+        raise SystemExit(128 + stopped)

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.conftest import run_cli
@@ -93,3 +97,50 @@ def test_a_texture_too_wide_is_refused_once(tmp_path: Path) -> None:
     assert done.returncode == 1, done.stdout + done.stderr
     assert "(this is 8200 x 2)" in done.stderr, done.stderr
     assert done.stderr.count("is not allowed") == 1, done.stderr
+
+
+def _ignore_sigint() -> None:
+    """A child as a shell starts a background job (``&``): SIGINT ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize(
+    ("sig", "after", "kept"),
+    [
+        (signal.SIGINT, "held-out: 10 frames rendered", "(stopped before training began: no model)"),
+        (signal.SIGTERM, "training: epoch 1 done", "and the unfinished model"),
+    ],
+)
+def test_train_perception_in_the_background_stops_on_a_signal_and_keeps_its_work(
+    tmp_path: Path, sig: signal.Signals, after: str, kept: str
+) -> None:
+    """Started with SIGINT ignored, SIGINT or SIGTERM stops it: 128 + the signal, what it kept said and on disk."""
+    command = [sys.executable, "-m", "tissue_retract", "train-perception", "--budget-s", "120", "--heldout", "10"]
+    process = subprocess.Popen(
+        [*command, "--out", str(tmp_path)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_ignore_sigint,
+    )
+    assert process.stdout is not None
+    lines = []
+    for line in process.stdout:
+        lines.append(line)
+        if line.startswith(after):
+            break
+    assert lines and lines[-1].startswith(after), "".join(lines)
+    process.send_signal(sig)
+    output, errors = process.communicate(timeout=120)
+    assert process.returncode == 128 + sig, "".join(lines) + output + errors
+    assert f"train-perception: stopped by {sig.name}: kept 10 held-out frames in" in output, output + errors
+    assert kept in output, output
+    assert "Traceback" not in errors, errors
+    frames = np.load(tmp_path / "heldout-frames.npz")
+    assert frames["images"].shape == (10, 6, 96, 128) and frames["sites_camera_m"].shape == (10, 3, 3)
+    if sig == signal.SIGTERM:
+        from policies.perception import load_estimator
+
+        estimator = load_estimator(tmp_path / "site-estimator-partial.safetensors")
+        assert estimator.info["unfinished"] is True and estimator.info["epochs_begun"] >= 1
+    assert not (tmp_path / "site-estimator.safetensors").exists()

@@ -28,7 +28,14 @@ from policies.perception.frames import ANY_COLOUR, LabelledFrames, render_frames
 from policies.perception.network import SiteEstimator, SiteNet
 from sim.endoscope import Endoscope
 
-__all__ = ["MAX_FRAMES", "RENDER_SHARE", "TrainingReport", "error_stats_mm", "train_site_estimator"]
+__all__ = [
+    "MAX_FRAMES",
+    "RENDER_SHARE",
+    "TrainingReport",
+    "TrainingState",
+    "error_stats_mm",
+    "train_site_estimator",
+]
 
 #: Share of the budget (after the held-out frames) spent rendering training frames.
 RENDER_SHARE = 0.35
@@ -75,13 +82,36 @@ class TrainingReport:
         return asdict(self)
 
 
+@dataclass
+class TrainingState:
+    """What a training has computed so far: a stopped training's caller keeps it.
+
+    Attributes:
+        heldout: The held-out frames, once rendered.
+        estimator: The estimator being trained (its network changes in place), once training has begun.
+        epochs: Passes over the training frames begun so far.
+    """
+
+    heldout: LabelledFrames | None = None
+    estimator: SiteEstimator | None = None
+    epochs: int = 0
+
+
 def error_stats_mm(estimated_m: np.ndarray, true_m: np.ndarray) -> tuple[float, float]:
     """Median and 95th percentile of the point distances [mm]."""
     distances = 1000.0 * np.linalg.norm(np.asarray(estimated_m) - np.asarray(true_m), axis=-1).ravel()
     return float(np.median(distances)), float(np.percentile(distances, 95))
 
 
-def _train(net: SiteNet, frames: LabelledFrames, mean_m: np.ndarray, deadline_s: float, seed: int) -> tuple[int, float]:
+def _train(
+    net: SiteNet,
+    frames: LabelledFrames,
+    mean_m: np.ndarray,
+    deadline_s: float,
+    seed: int,
+    state: TrainingState,
+    progress: Callable[[str], None],
+) -> tuple[int, float]:
     """Train until ``deadline_s`` (monotonic), one batch at least; return the epochs begun and the time spent [s]."""
     start = time.monotonic()
     generator = torch.Generator().manual_seed(seed)
@@ -95,6 +125,7 @@ def _train(net: SiteNet, frames: LabelledFrames, mean_m: np.ndarray, deadline_s:
     net.train()
     while epochs == 0 or time.monotonic() < deadline_s:
         epochs += 1
+        state.epochs = epochs
         order = torch.randperm(len(images), generator=generator)
         for first in range(0, len(order), batch):
             fraction = min(1.0, (time.monotonic() - start) / total)
@@ -107,6 +138,10 @@ def _train(net: SiteNet, frames: LabelledFrames, mean_m: np.ndarray, deadline_s:
             optimizer.step()
             if time.monotonic() >= deadline_s:
                 break
+        else:
+            progress(
+                f"training: epoch {epochs} done at {time.monotonic() - start:.1f} s, last batch loss {loss.item():.4f}"
+            )
     net.eval()
     return epochs, time.monotonic() - start
 
@@ -123,6 +158,7 @@ def train_site_estimator(
     any_colour: bool = False,
     endoscope: Endoscope | None = None,
     progress: Callable[[str], None] = print,
+    state: TrainingState | None = None,
 ) -> tuple[SiteEstimator, TrainingReport]:
     """Render, train and measure within ``budget_s`` seconds from ``started_s`` (:func:`time.monotonic`).
 
@@ -137,7 +173,10 @@ def train_site_estimator(
         any_colour: Train and measure on flaps of any colour (:data:`~policies.perception.frames.ANY_COLOUR`).
         endoscope: The endoscope (default :class:`Endoscope`).
         progress: Receives one line per stage.
+        state: Filled in as the training goes (the held-out frames, the estimator in training), for a
+            caller to keep what was computed when the training is stopped.
     """
+    state = state if state is not None else TrainingState()
     torch.manual_seed(seed)
     endoscope = endoscope or Endoscope()
     deadline = started_s + budget_s
@@ -147,6 +186,7 @@ def train_site_estimator(
     test = render_frames(
         task, [_HELDOUT_SEED_BASE + 10_000 * seed + i for i in range(heldout)], frames_per_reset=1, **options
     )
+    state.heldout = test
     progress(f"held-out: {len(test)} frames rendered in {test.seconds:.1f} s")
     render_until = time.monotonic() + RENDER_SHARE * max(0.0, deadline - time.monotonic() - _RESERVE_S)
     resets = range(_TRAIN_SEED_BASE + 100_000 * seed, _TRAIN_SEED_BASE + 100_000 * seed + MAX_FRAMES // 2)
@@ -154,8 +194,9 @@ def train_site_estimator(
     progress(f"training: {len(frames)} frames rendered in {frames.seconds:.1f} s")
     mean = frames.sites_camera_m.reshape(-1, 9).mean(axis=0)
     net = SiteNet()
-    epochs, train_s = _train(net, frames, mean, deadline - _RESERVE_S, seed)
     estimator = SiteEstimator(net, endoscope, mean, _LABEL_SCALE_M, {})
+    state.estimator = estimator
+    epochs, train_s = _train(net, frames, mean, deadline - _RESERVE_S, seed, state, progress)
     estimated = estimator.camera_sites(test.images)
     median, p95 = error_stats_mm(estimated, test.sites_camera_m)
     named_median, named_p95 = error_stats_mm(estimated, test.named_camera_m)

@@ -173,3 +173,38 @@ def test_killing_the_image_stream_holds(
     assert "stale: endoscope images" in output, output
     holds = summarize_recording(load_recording(record)).holds
     assert holds and "stale" in holds[0], holds
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_killed_render_process_is_said_plainly_and_the_console_goes_on(
+    endoscope_sim: tuple[subprocess.Popen[str], int, np.ndarray], sig: signal.Signals
+) -> None:
+    """The render process stopped by a signal while it publishes: one plain line from sim-dvrk, no traceback."""
+    process, render_pid, _ = endoscope_sim
+    rclpy.init()
+    try:  # the render process is publishing: a signal now lands between two publishes
+        watcher = _Watcher()
+        assert wait_until(lambda: rclpy.spin_once(watcher, timeout_sec=0.05) or watcher.count >= 8, timeout_s=120)
+        watcher.destroy_node()
+    finally:
+        rclpy.shutdown()
+    os.kill(render_pid, sig)
+    assert process.stdout is not None
+    said = threading.Event()
+    lines: list[str] = []
+
+    def read() -> None:
+        for line in process.stdout:  # type: ignore[union-attr]
+            lines.append(line)
+            if f"render process {render_pid} ended ({sig.name})" in line:
+                said.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    assert said.wait(timeout=60), "".join(lines)
+    assert process.poll() is None  # the console goes on
+    process.send_signal(signal.SIGINT)
+    assert process.wait(timeout=30) == 0
+    reader.join(timeout=10)
+    output = "".join(lines)
+    assert "Traceback" not in output and "RCLError" not in output, output

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -116,3 +117,34 @@ def test_a_calibration_that_overflows_holds_the_arm_and_replay_reads_the_recordi
     )
     assert replay.returncode == 0, replay.stdout + replay.stderr
     assert "hold: invalid data: measured_js effort" in replay.stdout, replay.stdout
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_stopped_calibration_exits_128_plus_the_signal_with_one_plain_line(
+    homed_sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path, sig: signal.Signals
+) -> None:
+    """SIGINT or SIGTERM mid-excitation: exit 130 or 143, one line naming the signal and the stage, no file."""
+    out = tmp_path / "wrench.json"
+    command = [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--domain-id", ros_env["ROS_DOMAIN_ID"]]
+    process = subprocess.Popen(
+        [*command, "--out", str(out), "--duration", "60", "--wait", "60"],
+        env=ros_env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert process.stdout is not None
+    lines = []
+    for line in process.stdout:
+        lines.append(line)
+        if "excitation 1 of 2" in line:
+            break
+    assert lines and "excitation 1 of 2" in lines[-1], "".join(lines)
+    process.send_signal(sig)
+    output, errors = process.communicate(timeout=120)
+    assert process.returncode == 128 + sig, "".join(lines) + output + errors
+    assert errors.strip().splitlines() == [
+        f"tissue-retract calibrate-wrench: stopped by {sig.name} during excitation 1 of 2: no calibration written; "
+        "the arm holds where it is"
+    ], errors
+    assert not out.exists()

@@ -25,6 +25,7 @@ import argparse
 import dataclasses
 import json
 import math
+import signal
 import sys
 import time
 from pathlib import Path
@@ -38,6 +39,7 @@ from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
+from sim.sweep.stopping import handling
 from tissue_retract.cli._checks import float_in
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
@@ -277,6 +279,7 @@ def run(args: argparse.Namespace) -> int:
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
     from hardware_if.commander_watch import served_by
+    from hardware_if.deploy import STOP_SIGNALS, Interrupted
     from hardware_if.errors import DvrkError
     from hardware_if.psm_client import PsmClient
     from hardware_if.session import ros_session
@@ -285,25 +288,49 @@ def run(args: argparse.Namespace) -> int:
     config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)
     chain = ControlChain(config)
     node = f"{args.arm.lower()}_calibrate_wrench"
-    with ros_session(), PsmClient(args.arm, node_name=node, deadman_timeout_s=_DEADMAN_S) as client:
-        try:
-            client.wait_for_measurement(args.wait)
-            reason = client.wait_ready(args.wait)
-            if reason:
-                print(
-                    f"tissue-retract calibrate-wrench: error: {reason} (enable and home the arm first)", file=sys.stderr
-                )
-                return 1
-            _to_start(client, args.wait)
-            print(f"{args.arm}: free space, no tissue in the jaws: excitation 1 of 2 ({args.duration:g} s)", flush=True)
-            fit = _trajectory(client, chain, _FREQUENCIES_HZ[0], args.duration, args.wait)
-            print(f"{args.arm}: excitation 2 of 2, held out ({args.duration:g} s)", flush=True)
-            held_out = _trajectory(client, chain, _FREQUENCIES_HZ[1], args.duration, args.wait)
-            consoles = served_by(client, args.arm)  # by now discovery has brought the console's name
-        except (DvrkError, RuntimeError) as e:
-            print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
-            return 1
-    calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
+    stage = "waiting for the arm"
+
+    def stop(signum: int, _frame: Any) -> None:
+        raise Interrupted(signum)
+
+    # Stop signals of its own, not rclpy's: rclpy's shut the context down under the next servo_jp ("Failed to
+    # publish: publisher's context is invalid"); these stop between two statements and leave the node cleanly.
+    try:
+        with handling(STOP_SIGNALS, stop):
+            with (
+                ros_session(signal_handlers=False),
+                PsmClient(args.arm, node_name=node, deadman_timeout_s=_DEADMAN_S) as client,
+            ):
+                try:
+                    client.wait_for_measurement(args.wait)
+                    reason = client.wait_ready(args.wait)
+                    if reason:
+                        print(
+                            f"tissue-retract calibrate-wrench: error: {reason} (enable and home the arm first)",
+                            file=sys.stderr,
+                        )
+                        return 1
+                    stage = "moving to the excitation's start"
+                    _to_start(client, args.wait)
+                    stage = "excitation 1 of 2"
+                    print(f"{args.arm}: free space, no tissue in the jaws: {stage} ({args.duration:g} s)", flush=True)
+                    fit = _trajectory(client, chain, _FREQUENCIES_HZ[0], args.duration, args.wait)
+                    stage = "excitation 2 of 2"
+                    print(f"{args.arm}: {stage}, held out ({args.duration:g} s)", flush=True)
+                    held_out = _trajectory(client, chain, _FREQUENCIES_HZ[1], args.duration, args.wait)
+                    consoles = served_by(client, args.arm)  # by now discovery has brought the console's name
+                except (DvrkError, RuntimeError) as e:
+                    print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
+                    return 1
+            stage = "the fit"
+            calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
+    except Interrupted as e:
+        print(
+            f"tissue-retract calibrate-wrench: stopped by {signal.Signals(e.signum).name} during {stage}: "
+            "no calibration written; the arm holds where it is",
+            file=sys.stderr,
+        )
+        return 128 + e.signum
     exact = not np.any(fit.effort) and not np.any(held_out.effort)
     calibration = dataclasses.replace(
         calibration, sensing=EXACT_SENSING if exact else "measured_js", console=_console_kind(consoles)

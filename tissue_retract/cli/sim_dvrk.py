@@ -204,8 +204,11 @@ def run(args: argparse.Namespace) -> int:
             # events executor runs is logged as a fatal callback error on its way out.
             stop = threading.Event()
             signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
+            endoscope = task.endoscope if task is not None else None
             while node.context.ok() and not stop.is_set():  # spin_once: see hardware_if.executor
                 executor.spin_once(timeout_sec=0.05)
+                if endoscope is not None and (ended := endoscope.ended()):  # killed: said once, the arm goes on
+                    print(ended, flush=True)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:

@@ -9,6 +9,11 @@ the command's start (default 570 s). Writes ``--out/site-estimator.safetensors``
 ``--perception camera:FILE``), ``--out/report.json`` and ``--out/frames.png``: eight randomized frames
 of other flaps with the true sites (green) and the estimates (blue), left eye, twice the size.
 
+SIGINT (Ctrl-C, also when started in the background of a script) and SIGTERM stop it within a batch and
+keep what it computed: the held-out frames (``--out/heldout-frames.npz``: ``images``, ``sites_camera_m``,
+``named_camera_m``) and, once training has begun, the unfinished model
+(``--out/site-estimator-partial.safetensors``, not measured); it exits with 130 or 143.
+
 ``--mark-sites`` inks the sites on the flap (a surgeon's marker): the offset becomes visible, and the
 commands that use the model ink them too. ``--texture FILE ...`` trains on your own flap images
 instead of the procedural textures.
@@ -18,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import time
 from pathlib import Path
 from typing import Any
@@ -26,6 +32,7 @@ import imageio.v2 as imageio
 import numpy as np
 
 import sim.envs
+from sim.sweep.stopping import handling
 from tissue_retract.cli._camera import check_texture
 from tissue_retract.cli._checks import check_out_folder, float_in, int_in
 from tissue_retract.cli.train import _command_started_s
@@ -33,6 +40,26 @@ from tissue_retract.cli.train import _command_started_s
 __all__ = ["add_arguments", "run"]
 
 _MODEL = "site-estimator.safetensors"
+_PARTIAL_MODEL = "site-estimator-partial.safetensors"
+_HELDOUT = "heldout-frames.npz"
+#: The signals that stop a training (it keeps what it computed).
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class _Stopped(KeyboardInterrupt):
+    """A stop signal arrived.
+
+    Attributes:
+        signum: The signal's number (the exit status is 128 + it).
+    """
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+def _stop(signum: int, _frame: Any) -> None:
+    raise _Stopped(signum)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,21 +86,31 @@ def run(args: argparse.Namespace) -> int:
     task = sim.envs.gym_id(args.task)
     textures = [check_texture(path) for path in args.texture]
     out = Path(args.out)
-    check_out_folder(out, [_MODEL, "report.json", "frames.png"], textures)
+    check_out_folder(out, [_MODEL, _PARTIAL_MODEL, _HELDOUT, "report.json", "frames.png"], textures)
     from policies.perception import train_site_estimator  # torch: imported once the arguments are good
+    from policies.perception.training import TrainingState
 
-    print(f"train-perception: {task}, budget {args.budget_s:g} s", flush=True)
-    estimator, report = train_site_estimator(
-        task,
-        budget_s=args.budget_s,
-        started_s=started,
-        seed=args.seed,
-        heldout=args.heldout,
-        mark_sites=args.mark_sites,
-        textures=textures,
-        any_colour=args.any_colour,
-        progress=lambda line: print(line, flush=True),
-    )
+    state = TrainingState()
+    # Handlers of its own, unblocked: a process started in the background of a script inherits SIGINT
+    # ignored, and Python's default SIGTERM would end it at once, losing what it rendered.
+    with handling(_STOP_SIGNALS, _stop):
+        try:
+            print(f"train-perception: {task}, budget {args.budget_s:g} s", flush=True)
+            estimator, report = train_site_estimator(
+                task,
+                budget_s=args.budget_s,
+                started_s=started,
+                seed=args.seed,
+                heldout=args.heldout,
+                mark_sites=args.mark_sites,
+                textures=textures,
+                any_colour=args.any_colour,
+                progress=lambda line: print(line, flush=True),
+                state=state,
+            )
+        except _Stopped as e:
+            print(f"train-perception: stopped by {signal.Signals(e.signum).name}: {_keep(out, state, args)}")
+            return 128 + e.signum
     estimator.info["command"] = args.command_line
     estimator.save(out / _MODEL)
     elapsed = time.monotonic() - started
@@ -94,6 +131,29 @@ def run(args: argparse.Namespace) -> int:
     write_frames_picture(out / "frames.png", estimator)
     print(f"frames: {out / 'frames.png'} (held-out frames; true sites green, estimates blue)")
     return 0
+
+
+def _keep(out: Path, state: Any, args: argparse.Namespace) -> str:
+    """Write what a stopped training computed; say what was kept."""
+    if state.heldout is None:
+        return "nothing to keep (stopped while rendering the held-out frames)"
+    # Not interrupted again while it writes: a second signal would lose what the first one keeps.
+    with handling(_STOP_SIGNALS, lambda _signum, _frame: None):
+        heldout = state.heldout
+        np.savez_compressed(
+            out / _HELDOUT,
+            images=heldout.images,
+            sites_camera_m=heldout.sites_camera_m,
+            named_camera_m=heldout.named_camera_m,
+        )
+        kept = f"kept {len(heldout)} held-out frames in {out / _HELDOUT}"
+        if state.estimator is None or state.epochs == 0:
+            return kept + " (stopped before training began: no model)"
+        state.estimator.info.update(
+            command=args.command_line, unfinished=True, epochs_begun=state.epochs, mark_sites=args.mark_sites
+        )
+        state.estimator.save(out / _PARTIAL_MODEL)
+    return f"{kept} and the unfinished model ({state.epochs} epoch(s) begun, not measured) in {out / _PARTIAL_MODEL}"
 
 
 def write_frames_picture(path: Path, estimator: Any, count: int = 8) -> None:
