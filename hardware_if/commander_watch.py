@@ -8,8 +8,13 @@ gets two masters, and each of them would see the arm leave its commands without 
 - every other node with a publisher on the arm's command topics (:data:`COMMANDED_TOPICS`: the servo,
   move, effort and jaw commands, ``state_command``, the console's settings, and the simulated scene's
   ``task/reset``), as ``another commander: /node publishes /PSM1/servo_jp``;
-- more than one console serving the arm (publishers of ``measured_js``, subscribers of
-  ``state_command``), as ``another console: ...``.
+- more than one console serving the arm (publishers of ``measured_js``; subscribers of ``state_command``
+  that also publish ``operating_state``), as ``another console: ...``. A node that only listens, as
+  ``ros2 topic echo`` or ``ros2 bag record`` does, serves nothing and is no console;
+- a sensed topic (the arm's state, the endoscope's images) published by more than one node, or by another
+  node than the one that published it when the sources were pinned (:meth:`CommanderWatch.pin_sources`,
+  before the first command), as ``another source: ...``: the data the chain and the policy act on come from
+  one source for the whole run.
 
 Nodes of this process are told apart by their fully qualified names, so every node of a commanding
 program needs a name of its own (the deploy's carry its process id). The watch answers what discovery
@@ -30,6 +35,7 @@ __all__ = [
     "DISCOVERY_QUIET_S",
     "DISCOVERY_S",
     "NAME_WAIT_S",
+    "SENSED_TOPICS",
     "UNNAMED",
     "WATCH_PERIOD_S",
     "CommanderWatch",
@@ -39,6 +45,19 @@ __all__ = [
 
 #: The arm's command topics (relative to ``/<arm>/``): what only one program may publish.
 COMMANDED_TOPICS = (*COMMAND_TOPICS, *CONSOLE_INPUT_TOPICS, "task/reset")
+#: The arm's sensed topics (relative to ``/<arm>/``): what the client acts on, from one source each.
+SENSED_TOPICS = (
+    "measured_js",
+    "setpoint_js",
+    "jaw/measured_js",
+    "jaw/setpoint_js",
+    "body/measured_cf",
+    "spatial/measured_cf",
+    "measured_cp",
+    "local/measured_cp",
+    "setpoint_cp",
+    "operating_state",
+)
 #: How often a running deploy reads the graph for other commanders [s].
 WATCH_PERIOD_S = 0.1
 #: An endpoint is discovered a little before its node's name (ROS sends names on a topic of its own): how
@@ -78,11 +97,40 @@ class CommanderWatch:
         own_nodes: Fully qualified names of this program's nodes (their publishers are not "others").
     """
 
-    def __init__(self, node: Any, arm: str, own_nodes: Iterable[str]) -> None:
+    def __init__(self, node: Any, arm: str, own_nodes: Iterable[str], sensed: Iterable[str] = ()) -> None:
         self.node = node
         self.arm = arm
         self.own_nodes = frozenset(own_nodes)
         self._topics = [f"/{arm}/{name}" for name in COMMANDED_TOPICS]
+        self._sensed = [*(f"/{arm}/{name}" for name in SENSED_TOPICS), *sensed]
+        self._pinned: dict[str, frozenset[str]] = {}
+
+    def sources(self) -> dict[str, frozenset[str]]:
+        """The nodes publishing each sensed topic (fully qualified topic name -> node names)."""
+        return {
+            topic: frozenset(node_name(i) for i in self.node.get_publishers_info_by_topic(topic))
+            for topic in self._sensed
+        }
+
+    def pin_sources(self) -> None:
+        """Take the sensed topics' publishers now as the run's sources (a topic with none is not pinned)."""
+        self._pinned = {topic: nodes for topic, nodes in self.sources().items() if nodes and UNNAMED not in nodes}
+
+    def _source_conflict(self) -> str:
+        for topic, nodes in self.sources().items():
+            if len(nodes) > 1:
+                return (
+                    f"another source: {topic} is published by {len(nodes)} nodes ({', '.join(sorted(nodes))}); "
+                    "one source per sensor (stop the other one)"
+                )
+            pinned = self._pinned.get(topic)
+            if pinned and nodes and UNNAMED not in nodes and nodes != pinned:
+                return (
+                    f"another source: {topic} is now published by {', '.join(nodes)}, not by "
+                    f"{', '.join(pinned)} that published it when the run started (a sensor's source does not "
+                    "change during a run)"
+                )
+        return ""
 
     def others(self) -> dict[str, list[str]]:
         """Other nodes with a publisher on a command topic: node name -> its topics, in topic order."""
@@ -95,17 +143,20 @@ class CommanderWatch:
         return found
 
     def consoles(self) -> list[str]:
-        """Nodes that serve the arm: publishers of ``measured_js`` and subscribers of ``state_command``.
+        """Nodes that serve the arm: publishers of ``measured_js``, and subscribers of ``state_command`` that
+        publish ``operating_state`` (a console answers the commands it takes).
 
-        One console publishes the first and subscribes to the second; a list longer than one entry per
-        role means a second console answers the same commands.
+        One console publishes the first and is the second; a list longer than one entry per role means a
+        second console answers the same commands. A node that only subscribes (``ros2 topic echo``, a
+        recorder) answers nothing and is not counted.
         """
         topics = ArmTopics(self.arm)
         publishers = served_by(self.node, self.arm)
+        states = {node_name(i) for i in self.node.get_publishers_info_by_topic(topics.topic("operating_state"))}
         subscribers = sorted(
-            node_name(i)
-            for i in self.node.get_subscriptions_info_by_topic(topics.topic("state_command"))
-            if node_name(i) not in self.own_nodes
+            name
+            for name in (node_name(i) for i in self.node.get_subscriptions_info_by_topic(topics.topic("state_command")))
+            if name not in self.own_nodes and name in states
         )
         return publishers if len(publishers) >= len(subscribers) else subscribers
 
@@ -160,4 +211,7 @@ class CommanderWatch:
         if others:
             named = "; ".join(f"{name} publishes {', '.join(topics)}" for name, topics in sorted(others.items()))
             return f"another commander: {named} (one commander per arm: stop it, then deploy again)"
-        return ""
+        try:
+            return self._source_conflict()
+        except Exception:  # as above
+            return ""

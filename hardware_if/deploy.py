@@ -48,7 +48,7 @@ import numpy as np
 import sim.envs
 from hardware_if.arm_pose import TrackingWatch, return_to_start, start_offset
 from hardware_if.commander_watch import DISCOVERY_S
-from hardware_if.endoscope_stream import DEFAULT_RIG
+from hardware_if.endoscope_stream import DEFAULT_RIG, camera_topics
 from hardware_if.errors import DvrkError, HoldError
 from hardware_if.gc_pauses import freeze_startup_heap
 from hardware_if.perceived_env import camera_task
@@ -432,7 +432,11 @@ def _to_start(
     if not offset:
         return
     if options.dry_run:
-        raise HoldError("not at start", f"episode {episode}: {offset} (a dry run moves nothing: move it there first)")
+        raise HoldError(
+            "not at start",
+            f"episode {episode}: {offset} (a dry run moves nothing: "
+            f"tissue-retract ready-arm --arm {options.arm} moves it there)",
+        )
     _require_exclusive(client, f"episode {episode}: before the move to its start")
     echo(f"episode {episode}: {offset}; moving the arm back (move_jp, jaw/move_jp)")
     try:
@@ -647,7 +651,11 @@ def _deploy_dvrk(
             echo(f"task state: registered site {format_point(site)}, goal {format_point(goal)} (no task topics)")
         else:
             listener = TaskListener(options.arm, listen_only=options.dry_run)
-        client.watch_commanders(*([listener.get_fully_qualified_name()] if isinstance(listener, TaskListener) else []))
+        own = [listener.get_fully_qualified_name()] if isinstance(listener, TaskListener) else []
+        sensed: tuple[str, ...] = ()
+        if options.perception is not None:  # the images the site is seen in: one source, as the arm's state
+            sensed = tuple(camera_topics(listener.rig).values())
+        client.watch_commanders(*own, sensed=sensed)
         try:
             try:
                 client.wait_for_measurement(options.wait_s)
@@ -658,6 +666,7 @@ def _deploy_dvrk(
             client.settle_graph(options.wait_s)  # the other programs on the domain, not only the console
             freeze_startup_heap()  # before the first command: short collector pauses from here on
             _require_exclusive(client, "before the first command")
+            client.pin_sources()  # from here on, a sensed topic's publisher may not change
             if options.site is not None:
                 _check_registered_site(options, config, client, echo)
             # The state arrives on its own topic, possibly after the first measured_js: wait for it too.

@@ -303,14 +303,22 @@ class PsmClient(Node):
         conflict, self._pending_unnamed = raw or self._pending_unnamed, ""
         return conflict
 
-    def watch_commanders(self, *own_nodes: str) -> None:
-        """Watch the graph for other commanders and consoles of the arm (:mod:`hardware_if.commander_watch`).
+    def watch_commanders(self, *own_nodes: str, sensed: tuple[str, ...] = ()) -> None:
+        """Watch the graph for other commanders, consoles and sources of the arm (:mod:`hardware_if.commander_watch`).
 
         From now on the deadman holds on one, every state command is refused while there is one, and
         :meth:`exclusive` reads the graph at once. ``own_nodes`` are this program's other nodes (fully
-        qualified names); this node is one of its own.
+        qualified names); this node is one of its own. ``sensed`` are other topics the run acts on (fully
+        qualified, e.g. the endoscope's images), watched for a second source as the arm's state topics are.
         """
-        self._commanders = CommanderWatch(self, self.topics.arm, {self.get_fully_qualified_name(), *own_nodes})
+        self._commanders = CommanderWatch(
+            self, self.topics.arm, {self.get_fully_qualified_name(), *own_nodes}, sensed=sensed
+        )
+
+    def pin_sources(self) -> None:
+        """Take the sensed topics' publishers now as the run's only sources (before the first command)."""
+        if self._commanders is not None:
+            self._commanders.pin_sources()
 
     def settle_graph(self, timeout_s: float) -> None:
         """Wait for discovery to go quiet before the first command (see :meth:`CommanderWatch.settle`)."""
@@ -334,13 +342,7 @@ class PsmClient(Node):
         """
         if self._commanders is None:
             return ""
-        reason = self._commanders.named_conflict()
-        publisher = self._commands["state_command"]
-        if not reason and publisher is not None and publisher.get_subscription_count() > 1:
-            reason = (
-                f"another console: {publisher.get_subscription_count()} consoles receive "
-                f"{self.topics.topic('state_command')}; one console per arm"
-            )
+        reason = self._commanders.named_conflict()  # consoles by what they serve, not by who listens
         with self._lock:
             self._conflict = reason
             self._lock.notify_all()

@@ -35,7 +35,6 @@ def dry_run_wait_hint(arm: str, state: str, homed: bool, wait_s: float) -> str:
     missing = "enabled and homed" if state != "ENABLED" else "homed"
     return (
         f"dry run: waiting up to {wait_s:g} s for {arm} to be ENABLED and homed; a dry run never enables or "
-        f"homes the arm. Get it {missing} from another terminal: with the dVRK's own Python client "
-        f"(arm = dvrk.psm(ral, '{arm}'); arm.enable(10); arm.home(10)), the console's GUI (Power On, Home), "
-        "or a deploy without --dry-run (it enables and homes before its first command)."
+        f"homes the arm. Get it {missing} and at the episodes' start from another terminal: "
+        f"tissue-retract ready-arm --arm {arm} (or the console's GUI: Power On, Home)."
     )

@@ -54,6 +54,7 @@ __all__ = [
     "DEPTH_BINS_M",
     "EXACT_SENSING",
     "MAX_FILE_BYTES",
+    "MIN_IMPROVEMENT",
     "RETRACTION_TIP_SPEED_M_S",
     "SPEED_BINS_M_S",
     "FreeSpaceError",
@@ -64,6 +65,7 @@ __all__ = [
     "inertia_allowance_n",
     "prepare_log",
     "read_calibration",
+    "unimproved",
 ]
 
 #: Cut-off of the zero-phase filter on logged velocities [Hz] (WPI's identification filtered at 5.4 Hz).
@@ -86,6 +88,12 @@ MAX_FILE_BYTES = 1024 * 1024
 #: ``sensing`` of a calibration fitted where the console's free-space efforts were all zero: a console that
 #: reports the exact force (``sim-dvrk --wrench ideal``), or one that sends no efforts.
 EXACT_SENSING = "ideal"
+#: How much lower a calibration's held-out free-space RMS error must be than the console's own before it is
+#: written: a fit that removes less than a third of the error has fitted something other than the arm's
+#: own dynamics (a load in the jaws, an arm away from the excitation's start, a scene touching the tool),
+#: and a deploy would trust its bound at poses it never saw. On a fresh sim-dvrk the fit is 18-21x lower;
+#: on the public PSM logs 2.5-9x.
+MIN_IMPROVEMENT = 1.5
 
 _REGRESSOR: EffortRegressor | None = None
 
@@ -354,6 +362,21 @@ def _solve(design: np.ndarray, target: np.ndarray, samples: int, exclude: int) -
     parameters = np.zeros(design.shape[1])
     parameters[columns] = values
     return columns, parameters
+
+
+def unimproved(calibration: WrenchCalibration) -> str:
+    """Why a fitted calibration must not be written (its held-out error not :data:`MIN_IMPROVEMENT` x lower
+    than the console's), or "" when it may. A console whose free-space efforts were all zero (an exact force)
+    has nothing to improve and may be written, marked as such."""
+    before, after = calibration.rms_before_n, calibration.rms_after_n
+    if before == 0.0 or after * MIN_IMPROVEMENT <= before:
+        return ""
+    return (
+        f"the fit lowers the held-out free-space force error only from {before:.3f} to {after:.3f} N RMS "
+        f"({before / max(after, 1e-12):.2f} x; a calibration must be at least {MIN_IMPROVEMENT:g} x lower): "
+        "something other than the arm's own dynamics moved the efforts (tissue or a load in the jaws, the arm "
+        "not free to move, or a log of another arm)"
+    )
 
 
 def fit_calibration(

@@ -19,6 +19,7 @@ default ``"0:3"``) and ``TISSUE_RETRACT_FAULT_GATE`` (the go file of :class:`Gat
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import queue
 import signal
@@ -34,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from hardware_if.executor import make_executor
 from hardware_if.network import local_ros_env
 from hardware_if.replay import load_recording, summarize_recording
 from psm_control.errors import ConfigurationError
@@ -62,6 +64,8 @@ AT_VARIABLE = "TISSUE_RETRACT_FAULT_AT"
 GATE_VARIABLE = "TISSUE_RETRACT_FAULT_GATE"
 #: The line a fault policy prints when it acts.
 MARK = "fault policy: episode"
+#: A refused or stopped run's files: none (the table's recording column).
+NOTHING_WRITTEN = "nothing written"
 #: Longest a gated or hanging policy waits before giving up (a guard; the runner acts long before) [s].
 GUARD_S = 600.0
 
@@ -165,9 +169,16 @@ class Fault:
         policy: The faulty policy (a class of this module).
         action: What the runner does when the policy's line appears: ``""`` (the policy is the fault),
             ``nan:<topic>``, ``early:<topic>`` (a NaN as the deploy starts), ``tracking``, ``disable``,
-            ``kill-console``, ``signal:<NAME>``, ``kill-deploy``.
-        status: Expected exit status.
-        reason: Text the hold (or interruption) reason must contain.
+            ``kill-console``, ``signal:<NAME>``, ``kill-deploy``, ``calibration`` (a calibration file whose
+            force overflows), ``second-force`` (another node publishes 0 N on the arm's force topics),
+            ``second-camera`` (another node publishes the endoscope's images), ``dead-camera`` (the
+            endoscope's render process killed, another node's images behind it), ``listener`` (a node that
+            subscribes to the arm's topics, as a recorder does, from before the deploy starts),
+            ``other-arm`` / ``exact-sensing`` (a calibration file made for PSM2, or fitted on a console that
+            reports the exact force), ``interrupt-calibration`` (``calibrate-wrench`` stopped by SIGINT
+            during its first excitation, in place of a deploy).
+        status: Expected exit status (0: the deploy must not hold at all; 1: it refuses before it starts).
+        reason: Text the hold (or interruption) reason must contain ("" with status 0).
         also: Other reasons that are as correct: a fault that trips two checks holds on whichever the deploy
             sees first.
         episodes: Episodes of the deploy.
@@ -190,6 +201,11 @@ class Fault:
     default_deadman: bool = False
     default_budget: bool = False
     also: tuple[str, ...] = ()
+
+    @property
+    def leaves_nothing(self) -> bool:
+        """Whether the fault ends before anything is written (a refusal at start, an interrupted calibration)."""
+        return self.status == 1 or self.action == "interrupt-calibration"
 
     def explains(self, hold: str) -> bool:
         """Whether a hold (or interruption) reason is one this fault should end with."""
@@ -214,6 +230,10 @@ class FaultResult:
     def ok(self) -> bool:
         """Expected status and reason, no traceback, and the hold (or interruption) in the recording."""
         recorded = any(self.fault.explains(h) for h in self.holds_recorded)
+        if self.fault.status == 0:  # nothing to hold on: the run ends as a run without the fault would
+            return self.status == 0 and not self.hold and not self.holds_recorded and not self.traceback
+        if self.fault.leaves_nothing:  # refused, or stopped before it wrote anything: no file is left behind
+            recorded = self.recording == NOTHING_WRITTEN
         if self.fault.action == "kill-deploy":
             recorded = self.truncated and self.episodes_kept == self.fault.episodes - 1
         return self.status == self.fault.status and self.fault.explains(self.hold) and not self.traceback and recorded
@@ -239,7 +259,17 @@ FAULTS: tuple[Fault, ...] = (
         )
     ),
     Fault("NaN on measured_js at start-up", "dvrk", "Gate", 4, "invalid data: measured_js", action="early:measured_js"),
-    Fault("tracking error", "dvrk", "Gate", 4, "tracking error", action="tracking"),
+    # Another node's setpoint_js 0.5 rad off: a second source of the arm's state, held as such (or, if the
+    # deploy reads one of its set-points first, as the tracking error it shows).
+    Fault(
+        "spoofed setpoint_js (tracking error)",
+        "dvrk",
+        "Gate",
+        4,
+        "another source: /PSM1/setpoint_js",
+        action="tracking",
+        also=("tracking error",),
+    ),
     # Another node's `disable` both disables the arm and commands it: either hold is the right one.
     Fault(
         "arm disabled mid-episode",
@@ -273,6 +303,55 @@ FAULTS: tuple[Fault, ...] = (
     Fault("second console at start", "dvrk", "Gate", 4, "another console: /PSM1 is served by 2", action="console"),
     Fault(
         "arm moved off its start (dry run)", "dvrk", "Gate", 4, "not at start", action="move-arm", extra=("--dry-run",)
+    ),
+    # The arm's sensors have one source each, and a listener is no console (docs/one-commander.md).
+    Fault(
+        "calibration overflows (force not finite)", "dvrk", "Gate", 4, "invalid data: measured_js effort", "calibration"
+    ),
+    Fault("second force publisher", "dvrk", "Gate", 4, "another source: /PSM1/", action="second-force"),
+    Fault(
+        "second camera publisher",
+        "dvrk",
+        "Gate",
+        4,
+        "another source: /jhu_daVinci/",
+        action="second-camera",
+        extra=("--perception", "camera"),
+    ),
+    Fault(
+        "camera dead, another publisher behind it",
+        "dvrk",
+        "Gate",
+        4,
+        "another source: /jhu_daVinci/",
+        action="dead-camera",
+        extra=("--perception", "camera"),
+        also=("stale: endoscope images",),
+    ),
+    Fault("a node listens to the arm (a recorder)", "dvrk", "FaultPolicy", 0, "", action="listener"),
+    Fault(
+        "calibration for another arm",
+        "dvrk",
+        "FaultPolicy",
+        1,
+        "a calibration of PSM1 (this one is PSM2's)",
+        "other-arm",
+    ),
+    Fault(
+        "calibration fitted on exact forces",
+        "dvrk",
+        "FaultPolicy",
+        1,
+        "a calibration fitted on the console it is used with",
+        action="exact-sensing",
+    ),
+    Fault(
+        "calibrate-wrench interrupted (SIGINT)",
+        "dvrk",
+        "FaultPolicy",
+        130,
+        "stopped by SIGINT during excitation 1 of 2: no calibration written",
+        action="interrupt-calibration",
     ),
     Fault("disk full mid-episode", "dvrk", "FaultPolicy", 4, "recording failed", "disk-full", episodes=3, at="-1:0"),
     Fault("disk full (sim)", "sim", "FaultPolicy", 4, "recording failed", action="disk-full", episodes=40, at="-1:0"),
@@ -367,6 +446,7 @@ class _Injector:
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = rclpy.create_node(f"fault_injector_{os.getpid()}", context=self.context)
         self.arm = arm
+        self.closed = False
 
     def publisher(self, topic: str) -> tuple[Any, Any]:
         """A publisher on ``/<arm>/<topic>`` and the injected (non-finite) message for it."""
@@ -394,6 +474,55 @@ class _Injector:
         # The simulated console subscribes to state_command volatile: the periodic QoS matches it.
         return self.node.create_publisher(kind, name, periodic_qos()), message
 
+    def zero_force(self) -> list[tuple[Any, Any]]:
+        """Publishers of 0 N on the arm's ``body/`` and ``spatial/measured_cf``, with their messages."""
+        from geometry_msgs.msg import WrenchStamped  # the ros extra
+
+        from hardware_if import convert
+        from hardware_if.crtk import ArmTopics, periodic_qos
+
+        out = []
+        for topic, frame in (("body/measured_cf", f"{self.arm}_tip"), ("spatial/measured_cf", f"{self.arm}_base")):
+            publisher = self.node.create_publisher(WrenchStamped, ArmTopics(self.arm).topic(topic), periodic_qos())
+            out.append((publisher, convert.wrench_stamped(np.zeros(3), frame_id=frame)))
+        return out
+
+    def images(self, rig: str = "jhu_daVinci") -> list[tuple[Any, Any]]:
+        """Publishers of grey stereo pairs on the endoscope's image topics, with their messages."""
+        from sensor_msgs.msg import Image  # the ros extra
+
+        from hardware_if.crtk import periodic_qos
+        from hardware_if.endoscope_stream import camera_topics
+
+        out = []
+        for side in ("left", "right"):
+            image = Image()
+            image.header.frame_id = f"{rig}_{side}"
+            image.height, image.width, image.encoding, image.step = 8, 8, "rgb8", 24
+            image.data = bytes(8 * 24)
+            topic = camera_topics(rig)[f"{side}_image"]
+            out.append((self.node.create_publisher(Image, topic, periodic_qos()), image))
+        return out
+
+    def listen(self) -> None:
+        """Subscribe to every topic of the arm, ``state_command`` included, as ``ros2 bag record -a`` does."""
+        from crtk_msgs.msg import OperatingState, StringStamped  # the ros extra
+        from geometry_msgs.msg import PoseStamped, WrenchStamped
+        from sensor_msgs.msg import JointState
+
+        from hardware_if.crtk import ArmTopics, event_qos, periodic_qos
+
+        t = ArmTopics(self.arm).topic
+        for kind, names, qos in (
+            (JointState, ("measured_js", "setpoint_js", "jaw/measured_js", "servo_jp", "jaw/servo_jp"), periodic_qos),
+            (PoseStamped, ("measured_cp", "local/measured_cp", "setpoint_cp"), periodic_qos),
+            (WrenchStamped, ("body/measured_cf",), periodic_qos),
+            (StringStamped, ("state_command",), periodic_qos),
+            (OperatingState, ("operating_state",), event_qos),
+        ):
+            for name in names:
+                self.node.create_subscription(kind, t(name), lambda _message: None, qos())
+
     def moved_message(self) -> Any:
         """A ``servo_jp`` 0.25 rad off the task's start on yaw, as a teleoperation node left running sends."""
         from hardware_if import convert
@@ -420,7 +549,20 @@ class _Injector:
                 return True
         return False
 
+    def flood_all(
+        self, pairs: list[tuple[Any, Any]], lines: _Lines, text: str | tuple[str, ...], timeout_s: float
+    ) -> bool:
+        """Publish every ``(publisher, message)`` until the deploy's output shows ``text`` or one of them."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline and not lines.ended:
+            for publisher, message in pairs:
+                publisher.publish(message)
+            if lines.wait_for(text, 0.01):
+                return True
+        return False
+
     def close(self) -> None:
+        self.closed = True
         self.node.destroy_node()
         self._rclpy.shutdown(context=self.context)
 
@@ -496,17 +638,32 @@ def _run_fault_in(
             config = workdir / "safety.toml"
             config.write_text("deadman_timeout_s = 1.0\n")
             deploy += ["--safety-config", str(config)]
+    if fault.action in ("calibration", "other-arm", "exact-sensing"):
+        deploy += ["--wrench-calibration", str(_calibration_file(fault.action, workdir))]
+    written = workdir / "wrench.out.json"  # what an interrupted calibrate-wrench must not leave
+    written.unlink(missing_ok=True)
+    if fault.action == "interrupt-calibration":
+        deploy = [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--domain-id", str(domain_id)]
+        deploy += ["--out", str(written), "--wait", "60"]
     console = injector = None
     lines: _Lines | None = None
     process: subprocess.Popen[str] | None = None
     try:
-        if fault.target == "dvrk":
+        if fault.target == "dvrk" and fault.status != 1:  # a refusal at start reaches no console
             server = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--domain-id", str(domain_id)]
-            console = _start([*server, "--task", "lift", "--seed", str(SEED)], env)
-            if "--dry-run" in fault.extra and "not ready" not in fault.reason:
-                _enable(domain_id, guard_s)
-        if fault.action.startswith(("nan:", "early:", "tracking", "disable", "rogue", "console")):
+            camera = ("--blind", "--endoscope") if "--perception" in fault.extra else ()  # the jaw tells the grasp
+            console = _start([*server, "--task", "lift", "--seed", str(SEED), *camera], env)
+            dry = "--dry-run" in fault.extra and "not ready" not in fault.reason
+            if dry or fault.action == "interrupt-calibration":
+                _ready_arm(env, domain_id, guard_s)
+        if fault.action.startswith(("nan:", "early:", "tracking", "disable", "rogue", "console", "second-", "dead-")):
             injector = _Injector(domain_id)
+        if fault.action == "listener":
+            injector = _Injector(domain_id)
+            injector.listen()
+            listening = make_executor()  # the listener takes its messages, as a recorder does
+            listening.add_node(injector.node)
+            threading.Thread(target=_spin_until_closed, args=(listening, injector), daemon=True).start()
         if fault.action == "console" and injector is not None:
             wait_until_served(domain_id, guard_s)  # a console starting now would see this one and refuse
             injector.publisher("measured_js")  # a second console's stream, discovered with the first
@@ -514,7 +671,10 @@ def _run_fault_in(
             move_arm_off_start(domain_id, guard_s)
         process = _start(deploy, env)
         lines = _Lines(process)
-        if fault.action and not fault.action.startswith("early:"):
+        if fault.action == "interrupt-calibration":
+            lines.wait_for("excitation 1 of 2", guard_s)  # the arm is moving along the excitation
+            process.send_signal(signal.SIGINT)
+        elif fault.action and not fault.action.startswith(("early:", "calibration", "listener")) and fault.status != 1:
             lines.wait_for(MARK, guard_s)  # mid-episode: after the ticks of the steps before the fault step
         if fault.action.startswith(("nan:", "early:")) and injector is not None:
             topic = fault.action.split(":", 1)[1]
@@ -523,13 +683,20 @@ def _run_fault_in(
         elif fault.action == "rogue" and injector is not None:
             publisher, _ = injector.publisher("servo_jp")
             injector.flood(publisher, injector.moved_message(), lines, "another commander", guard_s)
+        elif fault.action in ("second-force", "second-camera", "dead-camera") and injector is not None:
+            if fault.action == "dead-camera" and console is not None:
+                os.kill(_render_pid(lines, console), signal.SIGKILL)
+            pairs = injector.zero_force() if fault.action == "second-force" else injector.images()
+            # The client holds as soon as it sees the second source (the policy waits at the gate meanwhile).
+            injector.flood_all(pairs, lines, ("another source", *fault.also), guard_s)
         elif fault.action == "second-deploy":
             second = _start([*deploy[: deploy.index("--record")], "--record", str(workdir / "second.mcap")], env)
             second.wait(timeout=guard_s)
             lines.wait_for("another commander", min(guard_s, 60.0))  # the first saw it (it holds at the gate)
         elif fault.action == "tracking" and injector is not None:
             publisher, _ = injector.publisher("setpoint_js")
-            injector.flood(publisher, injector.tracking_message(), lines, "holding, tracking error", guard_s)
+            held = tuple(f"holding, {reason}" for reason in (fault.reason, *fault.also))
+            injector.flood(publisher, injector.tracking_message(), lines, held, guard_s)
         elif fault.action == "disable" and injector is not None:
             publisher, message = injector.publisher("state_command")
             # The injector both disables and commands the arm: the deploy holds on whichever it sees first.
@@ -553,28 +720,61 @@ def _run_fault_in(
             injector.close()
         if console is not None:
             _stop(console)
-    hold = next((line.strip() for line in output.splitlines() if "HOLD:" in line or "interrupted (" in line), "")
+    ends = ("HOLD:", "interrupted (", ": error: ", ": stopped by ")
+    hold = next((line.strip() for line in output.splitlines() if any(end in line for end in ends)), "")
+    if fault.leaves_nothing:
+        left = [path.name for path in (record, written) if path.exists()]
+        text = f"left behind: {', '.join(left)}" if left else NOTHING_WRITTEN
+        return FaultResult(fault, status, hold, "Traceback" in output, text, output)
     text, kept, holds, truncated = _recording_facts(record)
     return FaultResult(fault, status, hold, "Traceback" in output, text, output, kept, holds, truncated)
 
 
-def _enable(domain_id: int, guard_s: float) -> None:
-    """Enable and home the simulated arm (a dry run does not), with a client of its own context."""
-    import rclpy  # the ros extra
-    from rclpy.context import Context
+def _spin_until_closed(executor: Any, injector: _Injector) -> None:
+    """Spin the listener's node until the runner closes it (its context then ends the spin)."""
+    while not injector.closed:
+        try:
+            executor.spin_once(timeout_sec=0.05)
+        except Exception:  # the context was shut down from under the spin: the listener is done
+            return
 
-    from hardware_if.psm_client import PsmClient
 
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    try:
-        client = PsmClient("PSM1", node_name=f"fault_enable_{os.getpid()}", context=context)
-        with client:
-            client.wait_for_measurement(guard_s)
-            client.enable(guard_s)
-            client.home(guard_s)
-    finally:
-        rclpy.shutdown(context=context)
+def _calibration_file(action: str, workdir: Path) -> Path:
+    """A calibration file a deploy must not trust: its force overflows (``calibration``: finite parameters,
+    one of them 1e300, an effort offset), it is PSM2's (``other-arm``), or it was fitted where the console
+    reports the exact force (``exact-sensing``)."""
+    from hardware_if.wrench_calibration import EXACT_SENSING, WrenchCalibration
+    from psm_control.effort_model import EffortRegressor
+
+    path = workdir / "wrench.json"
+    offset = EffortRegressor().friction_start + 3 * 2 + 2  # the insertion's effort offset
+    calibration = WrenchCalibration("PSM1", (offset,), (0.05,), 1.0, 1.0, 1.0, 2.0, 0.1, 0.2, 1000)
+    if action == "calibration":
+        calibration = dataclasses.replace(calibration, parameters=(1e300,))
+    elif action == "other-arm":
+        calibration = dataclasses.replace(calibration, arm="PSM2")
+    elif action == "exact-sensing":
+        calibration = dataclasses.replace(calibration, parameters=(0.0,), sensing=EXACT_SENSING)
+    calibration.write(path)
+    return path
+
+
+def _render_pid(lines: _Lines, console: subprocess.Popen[str]) -> int:
+    """The endoscope's render process of a ``sim-dvrk --endoscope``, from the line it printed at its start."""
+    for line in console.stdout or ():
+        if line.startswith("endoscope: ") and "render process " in line:
+            return int(line.rsplit("render process ", 1)[1].rstrip(")\n "))
+    raise RuntimeError("sim-dvrk --endoscope printed no render process")
+
+
+def _ready_arm(env: dict[str, str], domain_id: int, guard_s: float) -> None:
+    """Enable, home and move the simulated arm to the start with ``tissue-retract ready-arm`` (a dry run does not)."""
+    command = [sys.executable, "-m", "tissue_retract", "ready-arm", "--domain-id", str(domain_id)]
+    done = subprocess.run(
+        [*command, "--wait", f"{guard_s:g}"], env=env, capture_output=True, text=True, timeout=guard_s, check=False
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"ready-arm failed ({done.returncode}): {done.stderr.strip()}")
 
 
 def scratch_dir() -> Path:

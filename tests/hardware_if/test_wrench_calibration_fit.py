@@ -111,3 +111,18 @@ def test_a_bad_log_is_an_error_message_not_a_traceback(tmp_path: Path, capsys) -
     assert main(["calibrate-wrench", "--from", str(bag), "--out", str(tmp_path / "w.json")]) == 1
     err = capsys.readouterr().err
     assert "/PSM1/measured_js" in err and "Traceback" not in err
+
+
+def test_a_fit_the_held_out_log_does_not_support_is_not_written(known: dict, tmp_path: Path, capsys) -> None:
+    """Held out on another arm's efforts (as after a deploy, with a load in the jaws), the fit lowers nothing:
+    calibrate-wrench exits 1 saying why and what to do, and writes no calibration."""
+    regressor = EffortRegressor()
+    held_q, held_qd, _ = known["held_out"]
+    other = np.random.default_rng(5).normal(scale=0.05, size=regressor.columns) * (known["truth"] != 0)
+    held_qdd = np.gradient(held_qd, 1.0 / RATE_HZ, axis=0)
+    held = _bag(tmp_path / "held", (held_q, held_qd, regressor.matrix(held_q, held_qd, held_qdd) @ other))
+    fit, out = _bag(tmp_path / "fit", known["fit"]), tmp_path / "wrench.json"
+    assert main(["calibrate-wrench", "--from", str(fit), "--held-out", str(held), "--out", str(out)]) == 1
+    error = capsys.readouterr().err
+    assert "a calibration must be at least 1.5 x lower" in error and "no calibration written" in error, error
+    assert not out.exists()

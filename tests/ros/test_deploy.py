@@ -116,15 +116,22 @@ def test_replay_prints_summary_and_plot(lift_run: tuple[int, str, Path], tmp_pat
 def test_dry_run_publishes_nothing_on_motion_topics(
     sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path
 ) -> None:
-    """A dry run against an enabled, homed arm sends nothing on motion topics, and reports and records."""
+    """After ``ready-arm`` (enable, home, to the start), a dry run sends nothing on motion topics, and
+    reports and records."""
     record = tmp_path / "dry.mcap"
     counts = dict.fromkeys(MOTION_TOPICS, 0)
+    ready = subprocess.run(
+        [sys.executable, "-m", "tissue_retract", "ready-arm", "--wait", "60"],
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert ready.returncode == 0, ready.stdout + ready.stderr
+    assert "PSM1: at the episodes' start" in ready.stdout and "ready" in ready.stdout
     rclpy.init()
     try:
-        with PsmClient("PSM1", node_name=f"dry_run_enable_{time.monotonic_ns()}") as operator:
-            operator.wait_for_measurement(timeout_s=60.0)
-            operator.enable(timeout_s=20.0)
-            operator.home(timeout_s=20.0)
         # The watcher only listens: a node with command publishers would be another commander to the deploy.
         with PsmClient("PSM1", node_name=f"dry_run_watch_{time.monotonic_ns()}", listen_only=True) as psm:
             topics = ArmTopics("PSM1")
@@ -170,7 +177,11 @@ def test_dry_run_on_a_fresh_console_says_at_once_what_it_waits_for(
     state = next(i for i, line in enumerate(lines) if "PSM1: operating state" in line)
     assert lines[state].endswith("operating state DISABLED, not homed"), lines[state]
     hint = lines[state + 1]
-    assert "waiting up to 10 s" in hint and "never enables or homes" in hint and "arm.home(" in hint, hint
+    assert (
+        "waiting up to 10 s" in hint
+        and "never enables or homes" in hint
+        and "tissue-retract ready-arm --arm PSM1" in hint
+    ), hint
     assert "nan" not in output.lower(), output
 
 

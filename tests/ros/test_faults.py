@@ -3,8 +3,8 @@
 Each fault of :data:`tissue_retract.faults.FAULTS` runs a real deploy child process (and a real sim-dvrk
 on a domain of its own, derived from this run's) and injects its fault when the deploy's policy prints
 that it reached the fault step: nothing is timed by sleeping. Every fault must end with its documented
-exit status (4 for a hold, 128 + signal for a stop signal), its reason on the ``HOLD:`` line, no
-traceback, and the hold in the recording; a SIGKILL in the third episode leaves a recording that
+exit status (4 for a hold, 128 + signal for a stop signal, 0 where the deploy must not hold), its reason on
+the ``HOLD:`` line, no traceback, and the hold in the recording; a SIGKILL in the third episode leaves a recording that
 ``replay`` summarises with the two finished episodes.
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from domains import fault_domain_id
 
-from tissue_retract.faults import FAULTS, Fault, run_fault
+from tissue_retract.faults import FAULTS, NOTHING_WRITTEN, Fault, run_fault
 
 
 @pytest.mark.slow
@@ -43,6 +43,10 @@ def test_fault_ends_in_a_recorded_hold(fault: Fault, tmp_path: Path) -> None:
         assert done.returncode == 0, done.stderr
         assert "truncated recording" in done.stdout and "2 episode(s)" in done.stdout, done.stdout
         assert "episode 0: success=True" in done.stdout and "episode 1: success=True" in done.stdout
+    elif fault.status == 0:  # the run must not hold: nothing recorded as one either
+        assert result.hold == "" and result.holds_recorded == [], result.output
+    elif fault.leaves_nothing:  # refused at start, or stopped before it wrote: no file left behind
+        assert result.recording == NOTHING_WRITTEN, result.recording
     else:
         assert result.holds_recorded and any(fault.explains(h) for h in result.holds_recorded), result.recording
         if fault.status == 4:

@@ -81,7 +81,7 @@ def test_calibrate_wrench_needs_an_enabled_arm(ros_env: dict[str, str], tmp_path
     finally:
         stop(process)
     assert result.returncode == 1, result.stdout + result.stderr
-    assert "enable and home the arm first" in result.stderr
+    assert "tissue-retract ready-arm --arm PSM1 enables and homes it" in result.stderr
     assert "Traceback" not in result.stderr
     assert not (tmp_path / "w.json").exists()
     assert wait_until(lambda: process.poll() is not None, timeout_s=10.0)

@@ -37,6 +37,7 @@ SUBCOMMANDS: dict[str, str] = {
     "tune-safety": "sweep safety limits and recommend a configuration",
     "tissue-test": "tension and shear tests of the flap's material, against the closed forms",
     "reproduce": "train and evaluate the paper's Tables 1 and 2",
+    "ready-arm": "enable and home the arm and move it to the episodes' start (before calibrate-wrench, a dry run)",
     "calibrate-wrench": "fit the dVRK's force-sensing errors in free space (for deploy --wrench-calibration)",
     "register": "register the grasp site by holding the jaws on it (for deploy --site)",
     "sim-dvrk": "serve the dVRK's CRTK topics from the simulation",

@@ -167,15 +167,11 @@ def _to_start(client: Any, wait_s: float) -> None:
 
     A homed PSM rests with the tool at the RCM, where the chain refuses to work (the dVRK's 45 mm minimum).
     """
-    start = PsmModel().home()
-    client.move_jp(start)
-    deadline = time.monotonic() + wait_s
-    while not np.allclose(client.measure().q, start, atol=1e-3):
-        if time.monotonic() > deadline:
-            raise RuntimeError(
-                f"the arm did not reach the excitation's start {start.round(3).tolist()} in {wait_s:g} s"
-            )
-        client.next_measurement(client.measure().stamp_s, wait_s)
+    from hardware_if.arm_pose import return_to_start
+
+    reason = return_to_start(client, PsmModel().home(), wait_s)
+    if reason:
+        raise RuntimeError(f"the arm did not reach the excitation's start: {reason}")
 
 
 def _table(summary: dict[str, Any]) -> str:
@@ -213,6 +209,7 @@ def _offline(args: argparse.Namespace) -> int:
         fit_calibration,
         prepare_log,
         read_calibration,
+        unimproved,
     )
 
     def prepared(paths: list[str]) -> list[Any]:
@@ -254,6 +251,14 @@ def _offline(args: argparse.Namespace) -> int:
         f"error bound for the safety filter: {calibration.error_bound_n:.2f} N without the acceleration "
         f"(a deploy), {calibration.error_bound_with_acceleration_n:.2f} N with it"
     )
+    refusal = unimproved(calibration)
+    if refusal:
+        print(
+            f"tissue-retract calibrate-wrench: error: {refusal}; no calibration written (fit and check on "
+            "free-space logs of this arm that cover the poses and speeds it is used at)",
+            file=sys.stderr,
+        )
+        return 1
     calibration.write(Path(output))
     print(f"written to {output} (fitted on {calibration.origin})")
     return 0
@@ -283,7 +288,7 @@ def run(args: argparse.Namespace) -> int:
     from hardware_if.errors import DvrkError
     from hardware_if.psm_client import PsmClient
     from hardware_if.session import ros_session
-    from hardware_if.wrench_calibration import EXACT_SENSING, fit_calibration, prepare_log
+    from hardware_if.wrench_calibration import EXACT_SENSING, fit_calibration, prepare_log, unimproved
 
     config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)
     chain = ControlChain(config)
@@ -306,7 +311,8 @@ def run(args: argparse.Namespace) -> int:
                     reason = client.wait_ready(args.wait)
                     if reason:
                         print(
-                            f"tissue-retract calibrate-wrench: error: {reason} (enable and home the arm first)",
+                            f"tissue-retract calibrate-wrench: error: {reason} "
+                            f"(tissue-retract ready-arm --arm {args.arm} enables and homes it)",
                             file=sys.stderr,
                         )
                         return 1
@@ -350,6 +356,14 @@ def run(args: argparse.Namespace) -> int:
         f"error bound for the safety filter: {calibration.error_bound_n:.3f} N "
         f"({calibration.error_bound_with_acceleration_n:.3f} N with the acceleration known)"
     )
+    refusal = unimproved(calibration)
+    if refusal:
+        print(
+            f"tissue-retract calibrate-wrench: error: {refusal}; no calibration written. Empty the jaws, "
+            f"nothing touching the instrument, then tissue-retract ready-arm --arm {args.arm} and calibrate again",
+            file=sys.stderr,
+        )
+        return 1
     calibration.write(Path(output))
     print(f"written to {output} (fitted on {calibration.origin})")
     return 0
