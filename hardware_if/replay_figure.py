@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from hardware_if.replay import Recording, answers
 from psm_control.robot import PsmModel
 
-__all__ = ["EpisodeSpan", "draw_recording", "episode_spans", "plot_recording"]
+__all__ = ["LAYOUT_KEY", "EpisodeSpan", "draw_recording", "episode_spans", "figure_layout", "plot_recording"]
 
 #: Events that stopped commanding.
 _HOLD_KINDS = ("hold", "deadman", "interrupted")
@@ -96,11 +96,25 @@ def _tip_error_mm(rec: Recording) -> np.ndarray:
     return error
 
 
+#: The PNG text field that names the figure's panels (:func:`figure_layout`), so a figure kept in the docs
+#: can be checked against what ``replay --plot`` draws today.
+LAYOUT_KEY = "Layout"
+
+
+def figure_layout(figure: Figure) -> str:
+    """The panels of a figure, top to bottom, by their y labels, and the x label: its layout in one line."""
+    axes = figure.get_axes()
+    labels = [" ".join(ax.get_ylabel().split()) or "events" for ax in axes]
+    return " | ".join(labels) + f" || {axes[-1].get_xlabel()}" if axes else ""
+
+
 def plot_recording(rec: Recording, out: str | Path) -> Path:
-    """Draw the figure of :func:`draw_recording` and write it (PNG, 200 dpi)."""
+    """Draw the figure of :func:`draw_recording` and write it (PNG, 200 dpi), its title and layout (the
+    panels, :func:`figure_layout`) in the PNG's text fields."""
     path = Path(out)
     path.parent.mkdir(parents=True, exist_ok=True)
-    draw_recording(rec).savefig(path)
+    figure = draw_recording(rec)
+    figure.savefig(path, metadata={"Title": figure.get_suptitle(), LAYOUT_KEY: figure_layout(figure)})
     return path
 
 

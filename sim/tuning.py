@@ -169,13 +169,17 @@ def recommend(
     """The most successful setting whose force limit and largest peak force are at most ``max_force_n``.
 
     A setting whose limit is above the bound is never recommended, however low its observed peaks: a few
-    episodes' largest peak does not bound the next episode's, the limit does. None if no setting qualifies.
+    episodes' largest peak does not bound the next episode's, the limit does. Nor is one under which the
+    policy never succeeded: that is no setting to run it with. None if no setting qualifies.
     """
     bound = max_force_n + _BOUND_TOLERANCE_N
     feasible = [
         r
         for r in results
-        if r.errors == 0 and r.max_peak_force_n <= bound and setting_force_limit_n(r.setting, base_config) <= bound
+        if r.errors == 0
+        and r.successes > 0
+        and r.max_peak_force_n <= bound
+        and setting_force_limit_n(r.setting, base_config) <= bound
     ]
     if not feasible:
         return None

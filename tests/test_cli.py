@@ -51,6 +51,15 @@ def test_kinematics_demo_agrees_three_ways() -> None:
     assert result.returncode == 0, result.stderr
     assert "psm_si_420006" in result.stdout
     assert "largest disagreement" in result.stdout
+    assert "x [mm]" in result.stdout and "DH err [m]" in result.stdout  # units are text, not rich markup
+
+
+def test_evaluate_prints_every_length_with_its_unit() -> None:
+    """evaluate's table names the unit of each length (rich would take "[mm]" for markup and drop it)."""
+    result = run_cli("evaluate", "--policy", "scripted", "--task", "lift", "--episodes", "1", "--seeds", "1")
+    assert result.returncode == 0, result.stderr
+    for row in ("workspace violation [mm]", "min insertion margin [mm]", "peak force [N]"):
+        assert row in result.stdout, result.stdout
 
 
 def test_all_packages_import() -> None:

@@ -91,6 +91,29 @@ def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentP
     return {}
 
 
+def _fit(text: str, width: int = HELP_COLUMNS) -> str:
+    """Lines of ``text`` wider than the page, broken at spaces: argparse aligns a long command's usage under
+    its name and cannot break inside one option group, so its lines can run past the page."""
+    import textwrap
+
+    lines = []
+    for line in text.splitlines():
+        if len(line) <= width:
+            lines.append(line)
+            continue
+        indent = min(len(line) - len(line.lstrip()), 8)
+        lines.extend(
+            textwrap.wrap(
+                line.strip(),
+                width,
+                initial_indent=" " * indent,
+                subsequent_indent=" " * (indent + 2),
+                break_on_hyphens=False,
+            )
+        )
+    return "\n".join(lines)
+
+
 def _command_help(path: list[str]) -> str:
     """The ``--help`` text of ``tissue-retract PATH...``, built as the command line builds it."""
     from tissue_retract.cli import build_parser
@@ -119,7 +142,7 @@ def command_reference() -> str:
     for path in _command_paths():
         title = "tissue-retract " + " ".join(path)
         level = "##" if len(path) == 1 else "###"
-        sections.append(f"{level} `{title}`\n\n```text\n{_command_help(path).rstrip()}\n```\n")
+        sections.append(f"{level} `{title}`\n\n```text\n{_fit(_command_help(path).rstrip())}\n```\n")
     return "\n".join(sections)
 
 

@@ -144,7 +144,31 @@ def _bin_label(low: float, high: float, parameter: ParameterRange) -> str:
     unit = " x" if parameter.relative else (f" {parameter.unit}" if parameter.unit else "")
     if parameter.integer:
         return f"{low:.0f}{unit}" if low == high else f"{low:.0f} to {high:.0f}{unit}"
+    if parameter.unit == "m" and not parameter.relative and max(abs(low), abs(high)) < 0.1:
+        return f"{1000 * low:.2f} to {1000 * high:.2f} mm"  # millimetres read better than 8.19e-05 m
     return f"{quantity(low)} to {quantity(high)}{unit}"
+
+
+#: Fewer episodes than this in a bin: its success rate is flagged as thin (with 20 episodes at 50 % success the
+#: Wilson 95 % interval is already 30-70 %).
+THIN_BIN_EPISODES = 20
+
+#: What the report's terms mean, printed under its summary.
+DEFINITIONS = (
+    ("success", "the task's goal reached at the episode's last step (the paper's criterion)"),
+    (
+        "tissue_damage",
+        "an episode in which the force on the tissue exceeded 5 N or a spring of the flap was stretched past twice "
+        "its rest length (sim.mechanics.DamageLimits), whatever the force limit of the safety filter",
+    ),
+    ("force limit exceeded", "episodes whose true peak retraction force went past the safety filter's limit"),
+    ("interventions", "constraints of the safety filter that changed a command, counted once per constraint and step"),
+    (
+        "thin",
+        f"a bin of fewer than {THIN_BIN_EPISODES} episodes: its success rate is known to +-20 points or worse "
+        "(read it with its 95 % CI)",
+    ),
+)
 
 
 def write_report(
@@ -211,6 +235,8 @@ def write_report(
         ("package", f"tissue-retract {__version__}"),
     ]
     page.card(rows, alert=alert)
+    page.heading("Terms")
+    page.table(["term", "meaning"], [list(row) for row in DEFINITIONS])
     if command:
         page.heading("Command")
         page.command(command)
@@ -232,7 +258,7 @@ def write_report(
             [
                 [
                     _bin_label(b.low, b.high, parameter),
-                    str(b.episodes),
+                    f"{b.episodes} (thin)" if b.episodes < THIN_BIN_EPISODES else str(b.episodes),
                     percent(b.success_rate),
                     percent_interval(b.ci_low, b.ci_high),
                     quantity(b.peak_force_max_n, "N"),

@@ -51,9 +51,9 @@ def blind_run(tmp_path_factory: pytest.TempPathFactory, ros_env: dict[str, str])
     assert sim.stdout is not None
     lines: list[str] = []
     try:
-        for line in sim.stdout:  # the site and goal come before the server spins
+        for line in sim.stdout:  # the site, the goal and the goal for a deploy come before the server spins
             lines.append(line)
-            if line.startswith("goal: "):
+            if line.startswith("for a deploy: "):
                 break
         topics = _task_topics(ros_env)
         registered = _run(ros_env, "register", "--wait", "60", "--out", str(folder / "registration.json"))
@@ -126,6 +126,8 @@ def test_blind_sim_dvrk_serves_no_task_topic_and_prints_site_and_goal(blind_run:
     first = blind_run["truth"][0]
     assert np.linalg.norm(site - np.array(first["site"])) < 2e-4, "the printed site is the flap at rest"
     assert np.allclose(goal, first["goal"], atol=1e-5)
+    # One goal: the deploy is told to take the scene's, not its own nominal one about the registered site.
+    assert blind_run["lines"][-1].startswith(f"for a deploy: --goal {' '.join(_point(blind_run['lines'], 'goal'))} ")
 
 
 def test_register_records_the_grasp_point_of_the_arm(blind_run: dict[str, Any]) -> None:

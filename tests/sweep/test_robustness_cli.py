@@ -109,3 +109,18 @@ def test_latency_is_swept_and_binned_in_whole_steps_and_outputs_are_strict_json(
     labels = {line.split("|")[1].strip() for line in report.splitlines() if "policy steps |" in line}
     assert labels and labels <= {"0 policy steps", "1 policy steps", "2 policy steps"}, report
     assert "success" in result.stdout and "95 % CI" in result.stdout
+
+
+def test_the_report_reads_as_a_reviewer_needs(tmp_path: Path) -> None:
+    """The report names the shipped file it ran (path and digest), defines its terms, gives small lengths in
+    millimetres and flags bins too thin to read alone."""
+    result = run_cli(
+        "robustness", "--policy", "pretrained", "--task", "lift", "--trials", "4", "--jobs", "2", "--no-progress",
+        "--vary", "obs_noise=0:0.002", "--force-sensing", "dvrk-calibrated", "--out", str(tmp_path),
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    report = (tmp_path / "report.md").read_text()
+    assert "pretrained: policies/pretrained/dvrk-calibrated/TissueRetract-Lift-v0.safetensors (sha256 " in report
+    assert "| tissue_damage | an episode in which the force on the tissue exceeded 5 N" in report
+    assert " mm | 1 (thin) |" in report or " mm | 2 (thin) |" in report, report
+    assert "e-05" not in report and "e-04" not in report

@@ -47,6 +47,13 @@ def test_recommendation_never_has_a_limit_above_the_bound() -> None:
     assert recommend([high_limit], 1.5) is None
 
 
+def test_a_setting_the_policy_never_succeeded_under_is_no_recommendation() -> None:
+    """Within the bound but 0 of 10: not recommended, however low its peaks."""
+    never, sometimes = _result(0.5, 0, 0.2), _result(1.0, 3, 0.9)
+    assert recommend([never, sometimes], 1.5) is sometimes
+    assert recommend([never], 1.5) is None
+
+
 def test_a_weak_recommendation_says_why() -> None:
     """Few episodes, low success and a wide 95 % CI are each named; a strong recommendation has no warning."""
     weak = SettingResult({"force_limit_n": 0.5}, 8, 2, 0.4, 0.2, 0, 0)
@@ -118,3 +125,24 @@ def test_tune_safety_never_writes_a_limit_above_the_bound(tmp_path: Path) -> Non
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary.get("recommended", {}).get("force_limit_n", 0.0) <= 1.5
     assert "95 % CI" in result.stdout and "WARNING: weak recommendation: only 2 episodes" in result.stdout
+
+
+def test_limits_below_the_sensing_bound_are_said_at_start_and_in_the_verdict(tmp_path: Path) -> None:
+    """With the console's uncalibrated force (8.89 N bound) every swept limit is below what it can tell: a start
+    warning, recorded in summary.json and the report, and no recommendation, saying why and what to change."""
+    result = run_cli(
+        "tune-safety", "--policy", "scripted", "--task", "lift", "--grid", "force_limit_n=0.5:1", "--levels", "2",
+        "--episodes", "2", "--jobs", "2", "--max-force-n", "1.5", "--force-sensing", "dvrk", "--out", str(tmp_path),
+        "--no-progress",
+    )  # fmt: skip
+    assert result.returncode == 1, result.stdout + result.stderr
+    stderr, stdout = " ".join(result.stderr.split()), " ".join(result.stdout.split())
+    assert "WARNING: 2 of 2 force limits swept (0.5, 1 N) are below the force sensing's error bound" in stderr
+    assert "Nothing recommended: the policy succeeded in no episode" in stdout
+    assert "Calibrate the force sensing" in stdout
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["force_sensing"] == "dvrk" and summary["force_sensing_error_n"] > 1.0
+    assert any("below the force sensing's error bound" in w for w in summary["warnings"])
+    report = (tmp_path / "settings.md").read_text()
+    assert "force sensing" in report and "dvrk, error bound" in report
+    assert "recommended" not in summary

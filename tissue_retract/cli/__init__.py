@@ -23,6 +23,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 from psm_control import __version__
 from psm_control.errors import TissueRetractError
+from tissue_retract.cli._help_text import plain_description
 
 __all__ = ["SUBCOMMANDS", "add_commands", "build_parser", "main"]
 
@@ -95,7 +96,10 @@ def add_commands(
             continue
         module = importlib.import_module(module_of(name))
         parser = subparsers.add_parser(
-            name, help=summary, description=module.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+            name,
+            help=summary,
+            description=plain_description(module.__doc__),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
         )
         if common is not None:
             common(parser)

@@ -19,6 +19,7 @@ import argparse
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from psm_control.dh import dh_tool_pose
 from psm_control.robot import PsmModel
@@ -76,7 +77,8 @@ def run_kinematics(args: argparse.Namespace) -> int:
         body = PsmBody(client, model)
         table = Table(title=f"{model.spec.name}: tool tip about the RCM (dVRK local/measured_cp)")
         for column in ("configuration", "x [mm]", "y [mm]", "z [mm]", "DH err [m]", "PyBullet err [m]", "cond(J) [-]"):
-            table.add_column(column, justify="right" if column != "configuration" else "left")
+            # Text, not markup: rich would take "[mm]" for a style tag and drop it.
+            table.add_column(Text(column), justify="right" if column != "configuration" else "left")
         worst = 0.0
         for name, q in _named_configurations(model.spec.rcm.cartesian_start_insertion_m).items():
             configuration.update(q)

@@ -77,7 +77,13 @@ __all__ = ["add_arguments", "run"]
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
-    parser.add_argument("--policy", required=True, help=POLICY_NAMES)
+    parser.add_argument(
+        "--policy",
+        required=True,
+        help=f"{POLICY_NAMES}; pretrained is the policy shipped for the task and the force sensing the run has "
+        "(--force-sensing with --target sim; with --target dvrk the console's: dvrk, or dvrk-calibrated with "
+        "--wrench-calibration) and, with --perception camera, the camera's",
+    )
     parser.add_argument("--target", required=True, choices=("sim", "dvrk"), help="simulation or a dVRK over ROS 2")
     parser.add_argument("--task", default="lift", help="task id: lift, target, multisite, expose (default: lift)")
     parser.add_argument("--arm", default="PSM1", help="arm name / topic namespace (default: PSM1)")
@@ -91,7 +97,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dry-run", action="store_true", help="compute and record, publish nothing on motion topics")
     parser.add_argument("--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml)")
     parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
-    add_force_sensing_argument(parser)
+    add_force_sensing_argument(
+        parser,
+        note=". --target sim only: with --target dvrk the filter senses what the console measures (dvrk, or "
+        "dvrk-calibrated with --wrench-calibration), and --policy pretrained takes the policy shipped for that "
+        "sensing",
+    )
     parser.add_argument(
         "--wrench-calibration",
         metavar="F.json",

@@ -30,6 +30,7 @@ import time
 
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 import sim.envs
 from hardware_if.perceived_env import PerceivedTask
@@ -221,32 +222,34 @@ def run(args: argparse.Namespace) -> int:
     table = Table(
         title=f"{args.policy} on {summary['task']} ({summary['episodes']} episodes{stopped}, {controller}{blind})"
     )
+
+    def add_row(metric: str, value: str) -> None:
+        table.add_row(Text(metric), Text(value))  # not markup: rich would take "[mm]" for a style tag
+
     table.add_column("metric")
     table.add_column("value", justify="right")
-    table.add_row("success", describe_success(sum(r.success for r in results), len(results)))
+    add_row("success", describe_success(sum(r.success for r in results), len(results)))
     limit = f" (limit {force_limit_n:g} N{'' if summary['safety'] else ', NOT enforced'})"
-    table.add_row("peak force [N]", f"{summary['peak_force_n']:.3f}{limit}")
-    table.add_row("mean peak force [N]", f"{summary['mean_peak_force_n']:.3f}")
+    add_row("peak force [N]", f"{summary['peak_force_n']:.3f}{limit}")
+    add_row("mean peak force [N]", f"{summary['mean_peak_force_n']:.3f}")
     if args.force_sensing != "ideal":
-        table.add_row(f"peak sensed force [N] ({args.force_sensing})", f"{summary['peak_measured_force_n']:.3f}")
-        table.add_row("force sensing error bound [N]", f"{summary['force_sensing_error_n']:.3f}")
+        add_row(f"peak sensed force [N] ({args.force_sensing})", f"{summary['peak_measured_force_n']:.3f}")
+        add_row("force sensing error bound [N]", f"{summary['force_sensing_error_n']:.3f}")
         travel = summary["worst_force_over_travel_bound"]
-        table.add_row("true force / travel bound", "never in force" if travel is None else f"at most {travel:.3f}")
+        add_row("true force / travel bound", "never in force" if travel is None else f"at most {travel:.3f}")
     if "site_error_mm" in summary:
         error = summary["site_error_mm"]
-        table.add_row(
-            "site error [mm]", f"median {error['median']:.2f}, p95 {error['p95']:.2f}, max {error['max']:.2f}"
-        )
-    table.add_row("force limit exceeded", describe_exceedances(summary))
-    table.add_row("force limit stalled retraction", describe_stalls(summary))
+        add_row("site error [mm]", f"median {error['median']:.2f}, p95 {error['p95']:.2f}, max {error['max']:.2f}")
+    add_row("force limit exceeded", describe_exceedances(summary))
+    add_row("force limit stalled retraction", describe_stalls(summary))
     for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops", "invalid_actions", "interventions"):
-        table.add_row(key, str(summary[key]))
-    table.add_row("joint limit violations", str(summary["joint_limit_violations"]))
-    table.add_row("workspace violation [mm]", f"{summary['workspace_violation_mm']:.2f}")
-    table.add_row("min insertion margin [mm]", f"{1000 * summary['min_insertion_margin_m']:.1f}")
+        add_row(key, str(summary[key]))
+    add_row("joint limit violations", str(summary["joint_limit_violations"]))
+    add_row("workspace violation [mm]", f"{summary['workspace_violation_mm']:.2f}")
+    add_row("min insertion margin [mm]", f"{1000 * summary['min_insertion_margin_m']:.1f}")
     for name, count in summary["failure_classes"].items():
-        table.add_row(f"failure: {name}", str(count))
-    table.add_row("env steps/s", f"{summary['env_steps_per_s']:.0f}")
+        add_row(f"failure: {name}", str(count))
+    add_row("env steps/s", f"{summary['env_steps_per_s']:.0f}")
     console.print(table)
     if output is not None:
         write_strict_json(output, {"summary": summary, "episodes": [r.to_dict() for r in results]})

@@ -114,6 +114,15 @@ def safety_overrides(path: Path | None) -> dict[str, object] | None:
     }
 
 
+def _shown_path(path: Path) -> str:
+    """A policy file's path relative to the installed packages' folder when it is inside it (a shipped one)."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        return str(Path(path).resolve().relative_to(root))
+    except ValueError:
+        return str(path)
+
+
 def _policy_digest(policy: str, task_id: str, variant: str) -> str | None:
     """SHA-256 of the file the policy loads (the shipped one for ``pretrained``); None for code policies."""
     path = policy_file(policy, task_id, variant)
@@ -229,8 +238,13 @@ def run(args: argparse.Namespace) -> int:
     )
     write_strict_json(out / "summary.json", summary, sort_keys=True)
     config = SafetyConfig.from_mapping(overrides or {})
+    variant = variant_for(args.force_sensing, getattr(args, "perception", None) is not None)
+    policy_path = policy_file(args.policy, task_id, variant)
+    policy = args.policy
+    if policy_path is not None:  # the file it ran, by path and digest, not only the name given
+        policy = f"{args.policy}: {_shown_path(policy_path)} (sha256 {str(file_digest(policy_path))[:12]})"
     context = {
-        "policy": args.policy,
+        "policy": policy,
         "task": task_id,
         "varied": ", ".join(r.describe() for r in ranges),
         "sampling": f"{args.mode}, {args.trials} trials, seed {args.seed}",

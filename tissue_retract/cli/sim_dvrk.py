@@ -190,6 +190,13 @@ def run(args: argparse.Namespace) -> int:
                 state = task.task_state()
                 for name in ("site", "goal"):
                     print(f"{name}: {format_point(state[name])}", flush=True)
+                # A deploy without --goal aims at the task's nominal goal about the site it is given, which
+                # differs from this scene's goal by the registration's error: one goal, given once.
+                print(
+                    f"for a deploy: --goal {format_point(state['goal'])} (the scene's goal; without --goal a "
+                    "deploy aims at the task's nominal goal about the registered site)",
+                    flush=True,
+                )
                 node.get_logger().info(f"task {args.task!r} scene (seed {args.seed}), blind: no task topics")
             elif task is not None:
                 topics = TaskTopics(node, task)

@@ -22,6 +22,7 @@ from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig
 from sim.envs import gym_id
+from sim.force_sensing import error_bound_n, sensing_params
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success
 from sim.sweep import EpisodeStore, cap_jobs, parse_ranges, prepare_output, run_trials
@@ -79,7 +80,9 @@ def _plot(
 ) -> None:
     figure = Figure(figsize=(5.5, 3.8), dpi=110)
     axis = figure.subplots()
-    for above, style in ((False, {"color": "tab:gray", "marker": "o"}), (True, {"color": "tab:red", "marker": "x"})):
+    # Settings above the bound are drawn last and on top (zorder), so the front's markers never hide them.
+    above_style = {"color": "tab:red", "marker": "x", "s": 60, "zorder": 4}
+    for above, style in ((False, {"color": "tab:gray", "marker": "o", "zorder": 2}), (True, above_style)):
         shown = [r for r, limit in zip(results, limits_n, strict=True) if (limit > bound + 1e-9) is above]
         axis.scatter(
             [r.max_peak_force_n for r in shown],
@@ -93,6 +96,7 @@ def _plot(
         "o-",
         color="tab:blue",
         label="Pareto front",
+        zorder=3,
     )
     if chosen is not None:
         axis.scatter(
@@ -114,7 +118,24 @@ def _plot(
     figure.savefig(path)
 
 
-def _nothing_recommended(results: list[SettingResult], bound: float, base: dict[str, object]) -> str:
+def _limits_below_sensing(limits_n: list[float], sensing: str, sensing_error_n: float | None) -> str:
+    """The run-start warning when some settings' force limits are below what the sensing can tell ('' if none)."""
+    if sensing_error_n is None:
+        return ""
+    below = [limit for limit in limits_n if limit <= sensing_error_n]
+    if not below:
+        return ""
+    return (
+        f"WARNING: {len(below)} of {len(limits_n)} force limits swept ({', '.join(f'{v:g}' for v in below)} N) "
+        f"are below the force sensing's error bound {sensing_error_n:.2f} N ({sensing}): under them the filter "
+        "cannot tell the limit from the measured force and keeps it from the grasp point's travel instead, so a "
+        "retraction may stop short. They are swept and shown, and recommended only where the policy succeeds"
+    )
+
+
+def _nothing_recommended(
+    results: list[SettingResult], bound: float, base: dict[str, object], sensing: str, sensing_error_n: float | None
+) -> str:
     """Why no setting qualified, with the numbers."""
     limits = [setting_force_limit_n(r.setting, base) for r in results]
     if all(limit > bound + 1e-9 for limit in limits):
@@ -122,6 +143,20 @@ def _nothing_recommended(results: list[SettingResult], bound: float, base: dict[
             f"every setting's force limit ({min(limits):g}-{max(limits):g} N) is above the bound {bound:g} N; "
             "sweep force_limit_n at or below it"
         )
+    within = [(r, limit) for r, limit in zip(results, limits, strict=True) if limit <= bound + 1e-9]
+    if all(r.successes == 0 for r, _ in within):
+        why = (
+            f"the policy succeeded in no episode under any setting with a force limit <= {bound:g} N "
+            f"({len(within)} setting(s), limits {min(lim for _, lim in within):g}-{max(lim for _, lim in within):g} N)"
+        )
+        if sensing_error_n is not None and all(lim <= sensing_error_n for _, lim in within):
+            why += (
+                f"; every one of those limits is below the force sensing's error bound {sensing_error_n:.2f} N "
+                f"({sensing}): the filter cannot tell the limit from the measured force and stops each retraction "
+                "at the grasp's travel bound. Calibrate the force sensing (calibrate-wrench, then "
+                "--force-sensing dvrk-calibrated), or raise --max-force-n if the tissue allows it"
+            )
+        return why
     return f"no setting with a force limit <= {bound:g} N kept its largest observed peak force under {bound:g} N"
 
 
@@ -151,6 +186,12 @@ def run(args: argparse.Namespace) -> int:
             args.policy, task_id, base, allow_other_task=args.allow_other_task, force_sensing=args.force_sensing
         )
     )
+    sensing_error_n = None if args.force_sensing == "ideal" else error_bound_n(sensing_params(args.force_sensing))
+    sensing_note = _limits_below_sensing(
+        sorted({setting_force_limit_n(t.params, base) for t in trials}), args.force_sensing, sensing_error_n
+    )
+    announce(sensing_note)
+    run_warnings = [sensing_note] if sensing_note else []
     check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
     identity = sweep_identity(
         args,
@@ -191,7 +232,10 @@ def run(args: argparse.Namespace) -> int:
     names = [r.name for r in ranges]
     page = Page(f"Safety tuning of {args.policy} on {task_id}")
     table = Table(title=f"tune-safety: {args.policy} on {task_id} (bound {bound:g} N)")
-    for column in [*names, "force limit [N]", "success [%]", "95 % CI [%]", "max peak [N]", "Pareto"]:
+    # The limit in force is a column of its own only when the grid does not sweep it (it would repeat it).
+    own_limit = "force_limit_n" not in names
+    limit_column = ["force limit"] if own_limit else []
+    for column in [*names, *limit_column, "success [%]", "95 % CI [%]", "max peak", "Pareto"]:
         table.add_column(column, justify="right")
     rows = []
     for r in results:
@@ -200,10 +244,11 @@ def run(args: argparse.Namespace) -> int:
         mark = ("front" if r in front else "") + (" recommended" if r is chosen else "")
         mark += " limit above bound" if limit_n > bound + 1e-9 else ""
         values = [quantity(r.setting[n], unit_of(n)) for n in names]
+        limit = [quantity(limit_n, "N")] if own_limit else []
         rows.append(
             [
                 *values,
-                quantity(limit_n, "N"),
+                *limit,
                 percent(r.success_rate),
                 percent_interval(low, high),
                 quantity(r.max_peak_force_n, "N"),
@@ -214,10 +259,10 @@ def run(args: argparse.Namespace) -> int:
         )
         table.add_row(
             *values,
-            f"{limit_n:g}",
+            *limit,
             f"{100 * r.success_rate:.0f}",
             f"{100 * low:.0f}-{100 * high:.0f}",
-            f"{r.max_peak_force_n:.3f}",
+            quantity(r.max_peak_force_n, "N"),
             mark.strip(),
         )
     _plot(results, front, chosen, bound, [setting_force_limit_n(r.setting, base) for r in results], out / "pareto.png")
@@ -238,6 +283,7 @@ def run(args: argparse.Namespace) -> int:
             for r in results
         ],
     }
+    summary.update(force_sensing=args.force_sensing, force_sensing_error_n=sensing_error_n)
     alert = ["verdict"]
     warnings: list[str] = []
     if chosen is not None:
@@ -266,18 +312,23 @@ def run(args: argparse.Namespace) -> int:
             "max_peak_force_n": chosen.max_peak_force_n,
             "warnings": warnings,
         }
-        alert = ["warnings"] if warnings else []
+        alert = ["warnings"] if warnings or run_warnings else []
     else:
-        why = _nothing_recommended(results, bound, base)
+        why = _nothing_recommended(results, bound, base, args.force_sensing, sensing_error_n)
         verdict = f"Nothing recommended: {why}"
+    summary["warnings"] = run_warnings + [f"weak recommendation: {w}" for w in warnings]
+    sensing = (
+        args.force_sensing if sensing_error_n is None else f"{args.force_sensing}, error bound {sensing_error_n:.2f} N"
+    )
     card = [
         ("policy", args.policy),
         ("task", task_id),
+        ("force sensing", sensing),
         ("asked", f"grid {args.grid} ({args.levels} levels, {len(results)} settings), force bound {bound:g} N"),
         ("episodes per setting", f"{args.episodes}, seed {args.seed}"),
         ("verdict", verdict),
         ("why", why),
-        ("warnings", "; ".join(warnings) if warnings else "none"),
+        ("warnings", "; ".join(run_warnings + warnings) or "none"),
         ("package", f"tissue-retract {__version__}"),
     ]
     page.card(card, alert=alert)
@@ -285,7 +336,7 @@ def run(args: argparse.Namespace) -> int:
     page.command(args.command_line)
     page.heading("Settings (every setting ran the same episode seeds)")
     page.table(
-        [*names, "force limit", "success", "95 % CI", "max peak force", "mean peak force", "interventions", "Pareto"],
+        [*names, *limit_column, "success", "95 % CI", "max peak force", "mean peak force", "interventions", "Pareto"],
         rows,
     )
     page.figure(out / "pareto.png", "success against the largest peak force; the Pareto front in blue")
