@@ -235,11 +235,11 @@ def write_report(
         ("package", f"tissue-retract {__version__}"),
     ]
     page.card(rows, alert=alert)
-    page.heading("Terms")
-    page.table(["term", "meaning"], [list(row) for row in DEFINITIONS])
     if command:
         page.heading("Command")
         page.command(command)
+    page.heading("Terms")
+    page.table(["term", "meaning"], [list(row) for row in DEFINITIONS])
     for parameter in ranges:
         stats = [
             b

@@ -71,6 +71,7 @@ def test_report_renders_in_chromium_with_no_raw_values(tmp_path: Path) -> None:
     assert layout["card"] == "grid"
     assert layout["headings"] == [
         "Command",
+        "Terms",
         "Success and peak force against stiffness=0.3:3x",
         "Failure classes against stiffness",
         "Peak force",
