@@ -39,6 +39,7 @@ __all__ = [
     "UNNAMED",
     "WATCH_PERIOD_S",
     "CommanderWatch",
+    "console_kind",
     "node_name",
     "served_by",
 ]
@@ -86,6 +87,14 @@ def node_name(info: Any) -> str:
 def served_by(node: Any, arm: str) -> list[str]:
     """The nodes publishing ``/<arm>/measured_js`` (consoles serving the arm), one entry per publisher."""
     return sorted(node_name(i) for i in node.get_publishers_info_by_topic(ArmTopics(arm).topic("measured_js")))
+
+
+def console_kind(consoles: list[str]) -> str:
+    """``sim-dvrk`` when this project's simulated console serves the arm, else ``dvrk`` (``unknown``: none, or
+    not yet named); ``consoles`` as :func:`served_by` lists them."""
+    if not consoles or not all(name.startswith("/") for name in consoles):
+        return "unknown"
+    return "sim-dvrk" if all(name.endswith("_sim_dvrk") for name in consoles) else "dvrk"
 
 
 class CommanderWatch:

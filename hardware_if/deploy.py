@@ -47,7 +47,7 @@ import numpy as np
 
 import sim.envs
 from hardware_if.arm_pose import TrackingWatch, return_to_start, start_offset
-from hardware_if.commander_watch import DISCOVERY_S
+from hardware_if.commander_watch import DISCOVERY_S, console_kind, served_by
 from hardware_if.endoscope_stream import DEFAULT_RIG, camera_topics
 from hardware_if.errors import DvrkError, HoldError
 from hardware_if.gc_pauses import freeze_startup_heap
@@ -447,6 +447,24 @@ def _to_start(
         raise HoldError("not at start", f"episode {episode}: {reason}")
 
 
+def _check_calibration_console(options: DeployOptions, client: Any) -> None:
+    """Hold before the first command when the calibration was fitted on another kind of console than the one
+    serving the arm (a simulated console's efforts are not a real PSM's, nor the reverse)."""
+    calibration = options.wrench_calibration
+    if calibration is None or calibration.console == "unknown":
+        return
+    consoles = served_by(client, options.arm)
+    serving = console_kind(consoles)
+    if serving not in ("unknown", calibration.console):
+        raise HoldError(
+            "calibration",
+            f"the wrench calibration was fitted on {calibration.origin}, and {options.arm} is served by a "
+            f"{serving} console ({', '.join(consoles)}): a calibration fitted on the console it is used with "
+            "(re-run tissue-retract calibrate-wrench against this one)",
+            {"fitted_on": calibration.console, "served_by": consoles},
+        )
+
+
 def _require_exclusive(client: Any, when: str) -> None:
     """Hold, before anything reaches a console, when another commander or console of the arm is in the graph."""
     reason = client.exclusive()
@@ -667,6 +685,7 @@ def _deploy_dvrk(
             freeze_startup_heap()  # before the first command: short collector pauses from here on
             _require_exclusive(client, "before the first command")
             client.pin_sources()  # from here on, a sensed topic's publisher may not change
+            _check_calibration_console(options, client)
             if options.site is not None:
                 _check_registered_site(options, config, client, echo)
             # The state arrives on its own topic, possibly after the first measured_js: wait for it too.

@@ -64,6 +64,8 @@ AT_VARIABLE = "TISSUE_RETRACT_FAULT_AT"
 GATE_VARIABLE = "TISSUE_RETRACT_FAULT_GATE"
 #: The line a fault policy prints when it acts.
 MARK = "fault policy: episode"
+#: Actions that act before the deploy's first step (no policy line to wait for).
+_AT_START = ("early:", "calibration", "listener", "other-console")
 #: A refused or stopped run's files: none (the table's recording column).
 NOTHING_WRITTEN = "nothing written"
 #: Longest a gated or hanging policy waits before giving up (a guard; the runner acts long before) [s].
@@ -174,9 +176,10 @@ class Fault:
             ``second-camera`` (another node publishes the endoscope's images), ``dead-camera`` (the
             endoscope's render process killed, another node's images behind it), ``listener`` (a node that
             subscribes to the arm's topics, as a recorder does, from before the deploy starts),
-            ``other-arm`` / ``exact-sensing`` (a calibration file made for PSM2, or fitted on a console that
-            reports the exact force), ``interrupt-calibration`` (``calibrate-wrench`` stopped by SIGINT
-            during its first excitation, in place of a deploy).
+            ``other-arm`` / ``exact-sensing`` / ``other-console`` (a calibration file made for PSM2, fitted
+            on a console that reports the exact force, or fitted on a real dVRK and used on sim-dvrk),
+            ``interrupt-calibration`` (``calibrate-wrench`` stopped by SIGINT during its first excitation,
+            in place of a deploy).
         status: Expected exit status (0: the deploy must not hold at all; 1: it refuses before it starts).
         reason: Text the hold (or interruption) reason must contain ("" with status 0).
         also: Other reasons that are as correct: a fault that trips two checks holds on whichever the deploy
@@ -344,6 +347,14 @@ FAULTS: tuple[Fault, ...] = (
         1,
         "a calibration fitted on the console it is used with",
         action="exact-sensing",
+    ),
+    Fault(
+        "calibration fitted on a real dVRK, used on sim-dvrk",
+        "dvrk",
+        "FaultPolicy",
+        4,
+        "calibration: the wrench calibration was fitted on PSM1 on dvrk",
+        action="other-console",
     ),
     Fault(
         "calibrate-wrench interrupted (SIGINT)",
@@ -638,7 +649,7 @@ def _run_fault_in(
             config = workdir / "safety.toml"
             config.write_text("deadman_timeout_s = 1.0\n")
             deploy += ["--safety-config", str(config)]
-    if fault.action in ("calibration", "other-arm", "exact-sensing"):
+    if fault.action in ("calibration", "other-arm", "exact-sensing", "other-console"):
         deploy += ["--wrench-calibration", str(_calibration_file(fault.action, workdir))]
     written = workdir / "wrench.out.json"  # what an interrupted calibrate-wrench must not leave
     written.unlink(missing_ok=True)
@@ -674,7 +685,7 @@ def _run_fault_in(
         if fault.action == "interrupt-calibration":
             lines.wait_for("excitation 1 of 2", guard_s)  # the arm is moving along the excitation
             process.send_signal(signal.SIGINT)
-        elif fault.action and not fault.action.startswith(("early:", "calibration", "listener")) and fault.status != 1:
+        elif fault.action and not fault.action.startswith(_AT_START) and fault.status != 1:
             lines.wait_for(MARK, guard_s)  # mid-episode: after the ticks of the steps before the fault step
         if fault.action.startswith(("nan:", "early:")) and injector is not None:
             topic = fault.action.split(":", 1)[1]
@@ -755,6 +766,8 @@ def _calibration_file(action: str, workdir: Path) -> Path:
         calibration = dataclasses.replace(calibration, arm="PSM2")
     elif action == "exact-sensing":
         calibration = dataclasses.replace(calibration, parameters=(0.0,), sensing=EXACT_SENSING)
+    elif action == "other-console":
+        calibration = dataclasses.replace(calibration, console="dvrk")
     calibration.write(path)
     return path
 

@@ -155,13 +155,6 @@ def _joint_log(samples: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]) 
     )
 
 
-def _console_kind(consoles: list[str]) -> str:
-    """``sim-dvrk`` when this project's simulated console serves the arm, else ``dvrk`` (``unknown``: none)."""
-    if not consoles or not all(name.startswith("/") for name in consoles):  # none, or not yet named
-        return "unknown"
-    return "sim-dvrk" if all(name.endswith("_sim_dvrk") for name in consoles) else "dvrk"
-
-
 def _to_start(client: Any, wait_s: float) -> None:
     """Move to the excitation's start (the tool 12 cm in, the wrist straight) with the console's move_jp.
 
@@ -283,7 +276,7 @@ def run(args: argparse.Namespace) -> int:
     output = check_output_path(args.out, "--out")
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
-    from hardware_if.commander_watch import served_by
+    from hardware_if.commander_watch import console_kind, served_by
     from hardware_if.deploy import STOP_SIGNALS, Interrupted
     from hardware_if.errors import DvrkError
     from hardware_if.psm_client import PsmClient
@@ -339,7 +332,7 @@ def run(args: argparse.Namespace) -> int:
         return 128 + e.signum
     exact = not np.any(fit.effort) and not np.any(held_out.effort)
     calibration = dataclasses.replace(
-        calibration, sensing=EXACT_SENSING if exact else "measured_js", console=_console_kind(consoles)
+        calibration, sensing=EXACT_SENSING if exact else "measured_js", console=console_kind(consoles)
     )
     if exact:
         print(
