@@ -27,6 +27,7 @@ from gymnasium.vector.async_vector_env import _async_worker
 
 from policies.buffers import Episode
 from policies.demos import collect_demos, expert_for
+from policies.registry import ensure_registered  # the worker's own registry: sim's tasks
 
 __all__ = ["Collector", "OverlappedCollector", "SerialCollector", "can_run_in_worker"]
 
@@ -75,8 +76,6 @@ class _TaskFactory:
         self.wrapper = wrapper
 
     def __call__(self) -> gym.Env[Any, Any]:
-        from policies.trainer import ensure_registered  # the worker's own registry: sim's tasks
-
         env = gym.make(ensure_registered(self.task_id))
         return _WorkerTask(self.wrapper(env) if self.wrapper is not None else env, self.task_id)
 

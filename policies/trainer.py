@@ -19,9 +19,7 @@ evaluations rather than the last one; the resume checkpoint is always the latest
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import importlib
 import itertools
 import time
 from collections.abc import Callable
@@ -49,7 +47,8 @@ from policies.collect import Collector, OverlappedCollector, SerialCollector, ca
 from policies.config import TrainConfig
 from policies.demos import collect_demos, default_attempts, expert_for, load_demos, rollout
 from policies.errors import CheckpointError, TrainingDivergedError
-from psm_control.errors import ConfigurationError, UnknownVariantError
+from policies.registry import ensure_registered
+from psm_control.errors import ConfigurationError
 
 __all__ = ["POLICY_FILE", "RESUME_FILE", "RunSpec", "TrainResult", "ensure_registered", "evaluate", "train"]
 
@@ -171,29 +170,6 @@ class TrainResult:
     def final_success(self) -> float:
         """Success rate of the last evaluation."""
         return self.success_rates[-1][1] if self.success_rates else float("nan")
-
-
-def ensure_registered(task_id: str) -> str:
-    """Make a task known to Gymnasium, importing the simulation package only when needed.
-
-    Returns:
-        The Gymnasium id: ``task_id`` itself, or the simulation's id for a short name (``lift``, ``III``).
-
-    Raises:
-        UnknownVariantError: No such task after importing ``sim``.
-    """
-    importlib.import_module("policies")
-    if task_id in gym.registry:
-        return task_id
-    with contextlib.suppress(ImportError):
-        sim_envs = importlib.import_module("sim.envs")
-        if task_id not in gym.registry:
-            with contextlib.suppress(UnknownVariantError):
-                return str(sim_envs.gym_id(task_id))
-    if task_id not in gym.registry:
-        known = sorted(k for k in gym.registry if k.startswith("TissueRetract-"))
-        raise UnknownVariantError("task", task_id, known)
-    return task_id
 
 
 def evaluate(
