@@ -152,7 +152,7 @@ class CameraSite(Node):
             (_, left), (_, right) = self._images["left"], self._images["right"]
             info = self._infos.get("left")
         frame = self._frame(image_array(left), image_array(right), info)
-        site = np.asarray(self.estimator.world_sites(frame)[self.site_index])
+        site = np.asarray(self.estimator.world_sites(frame, SITE_NAMES[self.site_index])[self.site_index])
         self.seen_site = site
         self.estimate = TaskEstimate(site, sim.envs.nominal_goal(self.task, site))
 

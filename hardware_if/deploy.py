@@ -650,9 +650,9 @@ def _deploy_dvrk(
         listener: Any  # TaskListener, RegisteredSite or CameraSite: the task source interface
         if options.perception is not None:
             from hardware_if.camera_site import CameraSite  # rclpy, as above
-            from policies.perception import load_estimator  # torch's network: only where the camera is used
+            from policies.perception import load_site_estimator  # torch's network: only where the camera is used
 
-            estimator = load_estimator(options.perception.partition(":")[2] or None)
+            estimator = load_site_estimator(options.perception.partition(":")[2] or None)
             listener = CameraSite(
                 options.task,
                 estimator,
@@ -733,7 +733,8 @@ def _deploy_dvrk(
                 listener.new_episode()
                 seen = getattr(listener, "seen_site", None)
                 if seen is not None:
-                    echo(f"episode {episode}: site seen at {format_point(seen)}")
+                    choice = getattr(getattr(listener, "estimator", None), "last_choice", "")
+                    echo(f"episode {episode}: site seen at {format_point(seen)}" + (f" by {choice}" if choice else ""))
                 # The arm must be ENABLED, homed, idle and valid before the first command of an episode.
                 reason = client.wait_ready(options.wait_s, after_s=after)
                 measured, start_jaw = client.measure(), view.config.jaw_open_rad

@@ -55,13 +55,17 @@ class PerceivedTask(RegisteredTask):
         """The estimator's site from one stereo pair; its error to the truth goes to ``info``."""
         rng = np.random.default_rng(None if seed is None else [int(seed), _APPEARANCE_STREAM])
         frame = task.render_endoscope(Appearance.sample(rng, task.config.endoscope), rng)
-        site = np.asarray(self.estimator.world_sites(frame)[SITE_NAMES.index(task.site)])
+        site = np.asarray(self.estimator.world_sites(frame, task.site)[SITE_NAMES.index(task.site)])
         info["site_error_mm"] = float(1000.0 * np.linalg.norm(site - task.site_position()))
+        choice = getattr(self.estimator, "last_choice", "")
+        if choice:  # the default estimator chose one of the two shipped ones for this flap
+            info["site_estimator"] = choice.split(" ", 1)[0]
         return site
 
 
 def camera_task(env: gym.Env, model: str | None = None, *, for_training: bool = False) -> PerceivedTask:
-    """``env`` seen through the endoscope by the estimator in ``model`` (None: the shipped one); picklable."""
-    from policies.perception import load_estimator  # torch's network: only where the camera is used
+    """``env`` seen through the endoscope by the estimator ``model`` names (None: the shipped default, which
+    chooses between the two shipped ones, :mod:`policies.perception.chooser`); picklable."""
+    from policies.perception import load_site_estimator  # torch's network: only where the camera is used
 
-    return PerceivedTask(env, load_estimator(model), for_training=for_training)
+    return PerceivedTask(env, load_site_estimator(model), for_training=for_training)

@@ -116,6 +116,9 @@ class EpisodeResult:
     force_limit_stall: list[dict[str, Any]] = field(default_factory=list)
     #: Distance of the site the policy observed at the start to the true site [mm] (None: the truth itself).
     site_error_mm: float | None = None
+    #: Which of the shipped site estimators the default camera estimator took for the episode's flap
+    #: (``pink`` or ``any-colour``; None: no such choice).
+    site_estimator: str | None = None
     #: The true force over the force bound's travel bound, at its largest (None: the travel bound was never
     #: in force: an exact sensor, or no grasp). Above 1, the tissue was stiffer or heavier than its bounds.
     peak_force_over_travel_bound: float | None = None
@@ -144,6 +147,7 @@ def run_episode(
     observation, info = env.reset(seed=seed, options=options)
     check_start_inside_workspace(env, float(info["workspace_violation_m"]))
     site_error_mm = float(info["site_error_mm"]) if "site_error_mm" in info else None
+    site_estimator = str(info["site_estimator"]) if "site_estimator" in info else None
     _call_policy(reset, seed, 0)
     counts = dict.fromkeys(_SEVERITY, 0)
     peak, steps, violations, stops, interventions = 0.0, 0, 0, 0, 0
@@ -188,6 +192,7 @@ def run_episode(
         force_limit_exceeded=list(info["force_limit_exceeded"]),
         force_limit_stall=list(info["force_limit_stall"]),
         site_error_mm=site_error_mm,
+        site_estimator=site_estimator,
         peak_force_over_travel_bound=info["force_over_travel_bound_peak"],
     )
 
@@ -243,13 +248,17 @@ def site_error_summary(results: Sequence[EpisodeResult]) -> dict[str, Any]:
     if not errors:
         return {}
     values = np.asarray(errors)
-    return {
+    summary: dict[str, Any] = {
         "site_error_mm": {
             "median": float(np.median(values)),
             "p95": float(np.percentile(values, 95)),
             "max": float(values.max()),
         }
     }
+    chosen = [r.site_estimator for r in results if r.site_estimator is not None]
+    if chosen:  # how often the default estimator took each shipped one
+        summary["site_estimator"] = {name: chosen.count(name) for name in sorted(set(chosen))}
+    return summary
 
 
 def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:

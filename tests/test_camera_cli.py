@@ -30,7 +30,8 @@ def test_train_perception_writes_its_model_report_and_picture(tmp_path: Path) ->
 
 
 def test_evaluate_with_the_camera_on_an_unseen_texture_reports_the_site_error(tmp_path: Path) -> None:
-    """evaluate --perception camera --texture FILE: the summary carries site_error_mm and the texture."""
+    """evaluate --perception camera --texture FILE: the summary carries site_error_mm, the texture and which
+    shipped estimator the default took per episode; no warning (it takes the any-colour one off the pink)."""
     out = tmp_path / "camera.json"
     texture = str(TEXTURES / "stripes-green.png")
     done = run_cli(
@@ -38,10 +39,24 @@ def test_evaluate_with_the_camera_on_an_unseen_texture_reports_the_site_error(tm
         "--perception", "camera", "--texture", texture, "--json", str(out),
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    summary = json.loads(out.read_text())["summary"]
+    report = json.loads(out.read_text())
+    summary = report["summary"]
     assert summary["perception"] == "camera" and summary["texture"].endswith("stripes-green.png")
     assert set(summary["site_error_mm"]) == {"median", "p95", "max"}
-    assert all(e["site_error_mm"] is not None for e in json.loads(out.read_text())["episodes"])
+    assert all(e["site_error_mm"] is not None and e["site_estimator"] for e in report["episodes"])
+    assert sum(summary["site_estimator"].values()) == 2 and "site estimator taken" in done.stdout
+    assert "WARNING" not in done.stderr and summary["warnings"] == []
+
+
+def test_the_pink_estimator_alone_warns_on_an_unseen_texture(tmp_path: Path) -> None:
+    """--perception camera:pink on a texture: the run-start warning that it may miss the site by centimetres."""
+    out = tmp_path / "camera.json"
+    done = run_cli(
+        "evaluate", "--policy", "pretrained", "--task", "lift", "--episodes", "1", "--seeds", "0",
+        "--perception", "camera:pink", "--texture", str(TEXTURES / "stripes-green.png"), "--json", str(out),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(out.read_text())["summary"]
     warning = "WARNING: the flap shows stripes-green.png, but the site estimator was trained on the tasks' pink flaps"
     assert warning in done.stderr and any(w.startswith(warning) for w in summary["warnings"])
 

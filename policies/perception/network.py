@@ -36,7 +36,10 @@ __all__ = ["SHIPPED_MODEL", "SHIPPED_MODELS", "SiteEstimator", "SiteNet", "load_
 SHIPPED_MODEL = Path(__file__).resolve().parent / "site-estimator.safetensors"
 #: The shipped models by the name ``--perception camera:NAME`` takes: ``any-colour`` was trained by
 #: ``train-perception --any-colour`` on flaps of any colour, for a flap that does not look like the tasks'.
-SHIPPED_MODELS = {"any-colour": SHIPPED_MODEL.with_name("site-estimator-any-colour.safetensors")}
+SHIPPED_MODELS = {
+    "pink": SHIPPED_MODEL,
+    "any-colour": SHIPPED_MODEL.with_name("site-estimator-any-colour.safetensors"),
+}
 _FORMAT = "tissue-retract-site-estimator"
 _MAX_FILE_BYTES = 64 * 1024 * 1024
 
@@ -114,8 +117,12 @@ class SiteEstimator:
         normalised = np.concatenate(out) if out else np.zeros((0, 9))
         return (normalised * self.label_scale_m + self.label_mean_m).reshape(-1, 3, 3)
 
-    def world_sites(self, frame: StereoFrame) -> np.ndarray:
-        """The three sites (3, 3) in the world [m] (``sim.tissue.SITE_NAMES`` order) from one frame."""
+    def world_sites(self, frame: StereoFrame, site: str | None = None) -> np.ndarray:
+        """The three sites (3, 3) in the world [m] (``sim.tissue.SITE_NAMES`` order) from one frame.
+
+        ``site`` (the one a run grasps) is for estimators that choose by it (:class:`~policies.perception.
+        chooser.SiteChooser`); one network estimates all three alike.
+        """
         camera = self.camera_sites(stereo_input(frame)[None])[0]
         pose = frame.world_from_camera
         return np.asarray(camera @ pose[:3, :3].T + pose[:3, 3])

@@ -24,7 +24,7 @@ class ShiftedTruth:
         self.env, self.mark_sites, self.endoscope = env, mark_sites, Endoscope(width=64, height=48)
         self.frames: list[StereoFrame] = []
 
-    def world_sites(self, frame: StereoFrame) -> np.ndarray:
+    def world_sites(self, frame: StereoFrame, site: str | None = None) -> np.ndarray:
         self.frames.append(frame)
         return true_sites(self.env.unwrapped) + _SHIFT_M
 

@@ -132,3 +132,25 @@ def test_a_model_file_of_another_shape_names_the_tensor_and_both_shapes(tmp_path
     message = str(caught.value)
     assert "tensor features.0.weight is [8, 8, 3, 3], expected [16, 8, 3, 3]" in message, message
     assert "width 16 with 32 keypoints" in message, message
+
+
+@pytest.mark.parametrize(
+    ("texture", "chosen", "at_least"),
+    [(None, "pink", 6), ("tests/data/textures/checker-blue.png", "any-colour", 10)],
+)
+def test_the_default_estimator_takes_the_pink_one_on_pink_flaps_and_the_any_colour_one_elsewhere(
+    texture: str | None, chosen: str, at_least: int
+) -> None:
+    """``--perception camera``: on the tasks' flaps the two shipped estimators agree and the pink one's site is
+    taken; on a checkerboard flap the pink one misses by centimetres, and the any-colour one's is taken."""
+    import sim.envs
+    from hardware_if.perceived_env import camera_task
+    from sim.tissue import TissueParams
+
+    env = camera_task(sim.envs.make("multisite", tissue=TissueParams(texture_path=texture)))
+    try:
+        infos = [env.reset(seed=seed)[1] for seed in range(2000, 2010)]
+    finally:
+        env.close()
+    assert sum(info["site_estimator"] == chosen for info in infos) >= at_least, [i["site_estimator"] for i in infos]
+    assert np.median([info["site_error_mm"] for info in infos]) < 5.0

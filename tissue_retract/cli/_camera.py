@@ -60,23 +60,24 @@ def add_perception_argument(parser: argparse.ArgumentParser) -> None:
         metavar="camera[:MODEL]",
         default=None,
         help="Tasks I-III: the observation's site from the site estimator on the endoscope's stereo images "
-        "(MODEL: a train-perception model file, or any-colour: the shipped one trained on flaps of any colour; "
-        "default: the shipped one trained on the tasks' pink flaps), a jaw-sensed grasp",
+        "(MODEL: a train-perception model file; pink or any-colour: the shipped one trained on the tasks' pink "
+        "flaps, or on flaps of any colour; default: both shipped ones, the pink one's site where the any-colour "
+        "one agrees within 2 mm, else the any-colour one's), a jaw-sensed grasp",
     )
 
 
 def load_perception(value: str | None) -> Any:
-    """The :class:`~policies.perception.SiteEstimator` that ``--perception`` names (None without it)."""
+    """The site estimator that ``--perception`` names (None without it; see ``load_site_estimator``)."""
     if value is None:
         return None
     kind, _, model = value.partition(":")
     if kind != "camera":
         raise ConfigurationError(
-            "--perception", value, "camera or camera:MODEL (a train-perception model file, or any-colour)"
+            "--perception", value, "camera or camera:MODEL (a train-perception model file, pink or any-colour)"
         )
-    from policies.perception import load_estimator  # torch: only when the camera is used
+    from policies.perception import load_site_estimator  # torch: only when the camera is used
 
-    return load_estimator(model or None)
+    return load_site_estimator(model or None)
 
 
 def tissue_params(texture: str | None) -> TissueParams:
@@ -94,6 +95,7 @@ def texture_warning(estimator: Any, texture: str | None) -> str:
         return ""
     return (
         f"WARNING: the flap shows {Path(texture).name}, but the site estimator was trained on the tasks' pink flaps "
-        "only: on a flap that looks otherwise it can miss the site by centimetres. Use --perception "
-        "camera:any-colour, or a model from train-perception --texture on photographs of this flap."
+        "only: on a flap that looks otherwise it can miss the site by centimetres. Use --perception camera (it "
+        "takes the any-colour estimator where the two disagree), camera:any-colour, or a model from "
+        "train-perception --texture on photographs of this flap."
     )

@@ -104,7 +104,7 @@ def _in_process(task: str, mode: str, seeds: Sequence[int]) -> list[dict[str, An
     import sim.envs
     from hardware_if.perceived_env import PerceivedTask
     from hardware_if.registered_env import RegisteredTask
-    from policies.perception import load_estimator
+    from policies.perception import load_site_estimator
     from policies.resolve import resolve_policy
     from sim.evaluation import run_episode
 
@@ -113,7 +113,7 @@ def _in_process(task: str, mode: str, seeds: Sequence[int]) -> list[dict[str, An
     if mode == "blind":
         env = RegisteredTask(env, registration_error_m=0.0)
     elif mode == "camera":
-        env = PerceivedTask(env, load_estimator(None))
+        env = PerceivedTask(env, load_site_estimator(None))
     episodes = []
     try:
         policy, reset = resolve_policy("pretrained", env)

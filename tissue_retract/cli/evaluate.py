@@ -240,6 +240,9 @@ def run(args: argparse.Namespace) -> int:
     if "site_error_mm" in summary:
         error = summary["site_error_mm"]
         add_row("site error [mm]", f"median {error['median']:.2f}, p95 {error['p95']:.2f}, max {error['max']:.2f}")
+        if "site_estimator" in summary:
+            taken = ", ".join(f"{name} {count}" for name, count in summary["site_estimator"].items())
+            add_row("site estimator taken (episodes)", taken)
     add_row("force limit exceeded", describe_exceedances(summary))
     add_row("force limit stalled retraction", describe_stalls(summary))
     for key in ("grip_losses", "tissue_damage", "sim_unstable", "safety_stops", "invalid_actions", "interventions"):
