@@ -119,6 +119,8 @@ class EpisodeResult:
     #: Which of the shipped site estimators the default camera estimator took for the episode's flap
     #: (``pink`` or ``any-colour``; None: no such choice).
     site_estimator: str | None = None
+    #: ``interventions`` by the constraint that changed the command (``joint_acceleration``, ...).
+    intervention_kinds: dict[str, int] = field(default_factory=dict)
     #: The true force over the force bound's travel bound, at its largest (None: the travel bound was never
     #: in force: an exact sensor, or no grasp). Above 1, the tissue was stiffer or heavier than its bounds.
     peak_force_over_travel_bound: float | None = None
@@ -151,6 +153,7 @@ def run_episode(
     _call_policy(reset, seed, 0)
     counts = dict.fromkeys(_SEVERITY, 0)
     peak, steps, violations, stops, interventions = 0.0, 0, 0, 0, 0
+    kinds: dict[str, int] = {}
     margin = float(info["insertion_m"]) - minimum_insertion
     outside_m = float(info["workspace_violation_m"])
     while True:
@@ -166,6 +169,8 @@ def run_episode(
         outside_m = max(outside_m, float(info["workspace_violation_m"]))
         stops += int(info["safety_stops"])
         interventions += len(info["interventions"])
+        for kind in info["interventions"]:
+            kinds[str(kind)] = kinds.get(str(kind), 0) + 1
         if terminated or truncated:
             break
     success = bool(info["is_success"]) and not counts["sim_unstable"]
@@ -193,6 +198,7 @@ def run_episode(
         force_limit_stall=list(info["force_limit_stall"]),
         site_error_mm=site_error_mm,
         site_estimator=site_estimator,
+        intervention_kinds=dict(sorted(kinds.items())),
         peak_force_over_travel_bound=info["force_over_travel_bound_peak"],
     )
 

@@ -137,7 +137,7 @@ def robustness_episode(
     result = run_episode(wrapped, policy_fn, policy_reset, int(trial["seed"]), options=options)
     outcome = result.to_dict()
     outcome.pop("seed", None)
-    outcome["interventions"] = {"total": int(result.interventions)}
+    outcome["interventions"] = {"total": int(result.interventions), **outcome.pop("intervention_kinds")}
     outcome["options"] = options
     return outcome
 

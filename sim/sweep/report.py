@@ -140,6 +140,13 @@ def _counts(counts: dict[str, int]) -> str:
     return ", ".join(f"{name} {count}" for name, count in counts.items() if count) or "none"
 
 
+def _interventions(counts: dict[str, int]) -> str:
+    """``{"total": 54, "joint_acceleration": 40, ...}`` as ``54 (joint_acceleration 40, ...)``."""
+    kinds = {name: count for name, count in counts.items() if name != "total"}
+    total = counts.get("total", sum(kinds.values()))
+    return f"{total} ({_counts(kinds)})" if kinds else str(total)
+
+
 def _bin_label(low: float, high: float, parameter: ParameterRange) -> str:
     unit = " x" if parameter.relative else (f" {parameter.unit}" if parameter.unit else "")
     if parameter.integer:
@@ -230,7 +237,7 @@ def write_report(
         ("safety stops", f"{summary['safety_stops']} ticks"),
         ("invalid actions", f"{summary['invalid_actions']} (held; the jaw kept)"),
         ("force limit exceeded", describe_exceedances(summary)),
-        ("interventions", _counts(summary["interventions"])),
+        ("interventions", _interventions(summary["interventions"])),
         ("failure classes", _counts(summary["failure_classes"])),
         ("package", f"tissue-retract {__version__}"),
     ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 from pathlib import Path
 
@@ -124,3 +125,4 @@ def test_the_report_reads_as_a_reviewer_needs(tmp_path: Path) -> None:
     assert "| tissue_damage | an episode in which the force on the tissue exceeded 5 N" in report
     assert " mm | 1 (thin) |" in report or " mm | 2 (thin) |" in report, report
     assert "e-05" not in report and "e-04" not in report
+    assert re.search(r"\*\*interventions\*\*: (0$|\d+ \([a-z_]+ \d+)", report, re.MULTILINE), report  # by kind
