@@ -305,7 +305,13 @@ FAULTS: tuple[Fault, ...] = (
     Fault("second deploy mid-episode", "dvrk", "Gate", 4, "another commander: ", action="second-deploy"),
     Fault("second console at start", "dvrk", "Gate", 4, "another console: /PSM1 is served by 2", action="console"),
     Fault(
-        "arm moved off its start (dry run)", "dvrk", "Gate", 4, "not at start", action="move-arm", extra=("--dry-run",)
+        "arm moved off its start (dry run)",
+        "dvrk",
+        "Gate",
+        4,
+        "(a dry run moves nothing: tissue-retract ready-arm --arm PSM1 moves it there)",
+        action="move-arm",
+        extra=("--dry-run",),
     ),
     # The arm's sensors have one source each, and a listener is no console (docs/one-commander.md).
     Fault(
