@@ -68,6 +68,8 @@ class CameraSite(Node):
         site: Which of the flap's sites is the task's (``centre``, ``left``, ``right``).
         wait_s: How long an episode's start waits for a fresh stereo pair [s].
         stale_after_s: Age of the last pair that holds the arm during an episode [s].
+        goal: Where the site must go [m] in ``<arm>_base`` (``deploy --goal``); None: the task's nominal goal
+            about the seen site, which then carries the estimate's error.
     """
 
     #: What a deploy's success is judged by.
@@ -86,11 +88,13 @@ class CameraSite(Node):
         site: str = "centre",
         wait_s: float = 30.0,
         stale_after_s: float = 0.5,
+        goal: np.ndarray | None = None,
     ) -> None:
         super().__init__(f"endoscope_site_{time.monotonic_ns() % 100000}")
         self.task, self.estimator, self.client = task, estimator, client
         self.rig, self.site_index = rig, SITE_NAMES.index(site)
         self.wait_s, self.stale_after_s = wait_s, stale_after_s
+        self.goal = None if goal is None else np.asarray(goal, dtype=float)
         endoscope = estimator.endoscope
         self.world_from_camera = look_at(np.asarray(endoscope.eye_m), np.asarray(endoscope.target_m))
         self.estimate: TaskEstimate | None = None
@@ -137,7 +141,8 @@ class CameraSite(Node):
         return False
 
     def new_episode(self) -> None:
-        """Wait for a pair taken from now on, estimate the site, and register it with the nominal goal.
+        """Wait for a pair taken from now on, estimate the site, and register it with the goal (given, or the
+        task's nominal goal about the seen site).
 
         Raises:
             HoldError: No fresh pair within ``wait_s`` (``not ready``), or images or camera info that do
@@ -154,7 +159,8 @@ class CameraSite(Node):
         frame = self._frame(image_array(left), image_array(right), info)
         site = np.asarray(self.estimator.world_sites(frame, SITE_NAMES[self.site_index])[self.site_index])
         self.seen_site = site
-        self.estimate = TaskEstimate(site, sim.envs.nominal_goal(self.task, site))
+        goal = self.goal if self.goal is not None else sim.envs.nominal_goal(self.task, site)
+        self.estimate = TaskEstimate(site, goal)
 
     def _frame(self, left: np.ndarray, right: np.ndarray, info: Any) -> StereoFrame:
         endoscope = self.estimator.endoscope

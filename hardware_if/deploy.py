@@ -200,8 +200,12 @@ class DeployOptions:
             raise ConfigurationError("site", self.site, "--site with --target dvrk (the simulation sees its tissue)")
         if self.perception is not None and self.site is not None:
             raise ConfigurationError("perception", self.perception, "either --perception or --site/--registration")
-        if self.goal is not None and self.site is None:
-            raise ConfigurationError("goal", self.goal, "--goal with --site (the task topics bring their own goal)")
+        if self.goal is not None and self.target != "dvrk":
+            raise ConfigurationError("goal", self.goal, "--goal with --target dvrk (the simulation sets its own goal)")
+        if self.goal is not None and self.site is None and self.perception is None:
+            raise ConfigurationError(
+                "goal", self.goal, "--goal with --site or --perception (the task topics bring their own goal)"
+            )
         if self.site is not None:
             as_point(self.site, "site")
         if self.goal is not None:
@@ -660,8 +664,12 @@ def _deploy_dvrk(
                 rig=options.endoscope_rig,
                 wait_s=options.wait_s,
                 stale_after_s=options.image_timeout_s,
+                goal=None if options.goal is None else np.asarray(options.goal, dtype=float),
             )
-            echo(f"task state: the site from the endoscope's images on /{listener.rig}/ (no task topics)")
+            aim = "the task's nominal goal about the seen site"
+            if options.goal is not None:
+                aim = format_point(np.asarray(options.goal, dtype=float))
+            echo(f"task state: the site from the endoscope's images on /{listener.rig}/, goal {aim} (no task topics)")
         elif options.site is not None:
             site = np.asarray(options.site, dtype=float)
             goal = sim.envs.nominal_goal(options.task, site) if options.goal is None else np.asarray(options.goal)

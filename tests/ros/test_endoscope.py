@@ -124,13 +124,17 @@ def _deploy(
 def test_deploy_completes_episodes_from_the_images_alone(
     endoscope_sim: tuple[subprocess.Popen[str], int, np.ndarray], ros_env: dict[str, str], tmp_path: Path
 ) -> None:
-    """With no task topics and no registration, two episodes run to their end on a site seen within 6 mm."""
-    _, _, true_site = endoscope_sim
+    """With no task topics and no registration, two episodes run to their end on a site seen within 6 mm, each
+    saying which shipped estimator saw it, toward the goal given with --goal (the one sim-dvrk printed)."""
+    console, _, true_site = endoscope_sim
+    assert console.stdout is not None
+    goal = next(line.split()[1:4] for line in console.stdout if line.startswith("goal: "))  # after the site line
     record = tmp_path / "camera.mcap"
-    deploy = _deploy(ros_env, record, "--episodes", "2", "--image-timeout", "5", policy="pretrained")
+    deploy = _deploy(ros_env, record, "--episodes", "2", "--image-timeout", "5", "--goal", *goal, policy="pretrained")
     output, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
     assert deploy.returncode == 0, output
-    assert "no task topics" in output
+    assert f"goal {' '.join(goal)} (no task topics)" in output
+    assert len(re.findall(r"site seen at \S+ \S+ \S+ by (?:pink|any-colour) \(", output)) == 2, output
     assert "shipped one trained on dvrk force sensing (dvrk/TissueRetract-Lift-v0" in output  # the console's force
     seen = [np.array([float(v) for v in m.split()]) for m in re.findall(r"site seen at (\S+ \S+ \S+)", output)]
     assert len(seen) == 2

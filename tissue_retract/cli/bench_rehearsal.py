@@ -11,8 +11,9 @@ same seeds with the force the console senses (``--force-sensing dvrk``, as ``sim
 - ``blind``: ``sim-dvrk --task T --blind`` and ``deploy --site X Y Z --goal X Y Z`` with the site and goal it
   printed, one console per episode (a registration is of one scene). In-process: ``--blind
   --registration-error-mm 0``.
-- ``camera``: ``sim-dvrk --task T --blind --endoscope`` and ``deploy --perception camera``, one console per
-  episode (the camera sees the site; the jaw, stalled on the held flap, tells the grasp).
+- ``camera``: ``sim-dvrk --task T --blind --endoscope`` and ``deploy --perception camera --goal X Y Z`` with
+  the goal it printed, one console per episode (the camera sees the site; the jaw, stalled on the held
+  flap, tells the grasp).
   In-process: ``--perception camera``.
 
 Every episode is scored on the console's ground truth, not on what the deploy estimated: with task topics,
@@ -269,11 +270,13 @@ def _ros(task: str, mode: str, seeds: Sequence[int], folder: Path, args: argpars
             console = _Console(task, seed, folder, extra)
             record = folder / f"{task}-{mode}-{seed}.mcap"
             try:
+                # The goal is the scene's, given as the in-process episode is given it (PerceivedTask and
+                # RegisteredTask take the episode's goal); only the site is registered or seen.
+                site, goal = console.printed("site"), console.printed("goal")
                 if mode == "blind":
-                    site, goal = console.printed("site"), console.printed("goal")
                     output = _deploy(task, seed, 1, record, args, "--site", *site, "--goal", *goal)
                 else:
-                    output = _deploy(task, seed, 1, record, args, "--perception", "camera")
+                    output = _deploy(task, seed, 1, record, args, "--perception", "camera", "--goal", *goal)
             finally:
                 truth = console.stop()
             deployed(record, output)

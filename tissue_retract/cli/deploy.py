@@ -125,7 +125,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     point_argument(
         parser,
         "--goal",
-        "with --site/--registration: where the site must go [m] in <arm>_base (default: the task's nominal goal)",
+        "with --site/--registration or --perception camera: where the site must go [m] in <arm>_base (default: "
+        "the task's nominal goal about the site, which with the camera carries the estimate's error)",
     )
     add_perception_argument(parser)
     parser.add_argument(
