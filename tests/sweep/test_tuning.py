@@ -138,8 +138,8 @@ def test_limits_below_the_sensing_bound_are_said_at_start_and_in_the_verdict(tmp
     assert result.returncode == 1, result.stdout + result.stderr
     stderr, stdout = " ".join(result.stderr.split()), " ".join(result.stdout.split())
     assert "WARNING: 2 of 2 force limits swept (0.5, 1 N) are below the force sensing's error bound" in stderr
-    assert "Nothing recommended: the policy succeeded in no episode" in stdout
-    assert "Calibrate the force sensing" in stdout
+    assert "Nothing recommended" in stdout and "Why: the policy succeeded in no episode" in stdout
+    assert "calibrate the force sensing" in stdout and "Raise --max-force-n above 8.89 N" in stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["force_sensing"] == "dvrk" and summary["force_sensing_error_n"] > 1.0
     assert any("below the force sensing's error bound" in w for w in summary["warnings"])

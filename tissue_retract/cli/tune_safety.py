@@ -126,7 +126,7 @@ def _limits_below_sensing(limits_n: list[float], sensing: str, sensing_error_n: 
     if not below:
         return ""
     return (
-        f"WARNING: {len(below)} of {len(limits_n)} force limits swept ({', '.join(f'{v:g}' for v in below)} N) "
+        f"WARNING: {len(below)} of {len(limits_n)} force limits swept ({', '.join(f'{v:.3g}' for v in below)} N) "
         f"are below the force sensing's error bound {sensing_error_n:.2f} N ({sensing}): under them the filter "
         "cannot tell the limit from the measured force and keeps it from the grasp point's travel instead, so a "
         "retraction may stop short. They are swept and shown, and recommended only where the policy succeeds"
@@ -145,16 +145,22 @@ def _nothing_recommended(
         )
     within = [(r, limit) for r, limit in zip(results, limits, strict=True) if limit <= bound + 1e-9]
     if all(r.successes == 0 for r, _ in within):
+        low, high = min(lim for _, lim in within), max(lim for _, lim in within)
         why = (
             f"the policy succeeded in no episode under any setting with a force limit <= {bound:g} N "
-            f"({len(within)} setting(s), limits {min(lim for _, lim in within):g}-{max(lim for _, lim in within):g} N)"
+            f"({len(within)} setting(s), limits {low:.3g}-{high:.3g} N)"
         )
         if sensing_error_n is not None and all(lim <= sensing_error_n for _, lim in within):
+            better = (
+                "a calibration of the robot's own force sensing with a tighter bound (calibrate-wrench) would lower it"
+                if sensing == "dvrk-calibrated"
+                else "calibrate the force sensing (calibrate-wrench; --force-sensing dvrk-calibrated here)"
+            )
             why += (
                 f"; every one of those limits is below the force sensing's error bound {sensing_error_n:.2f} N "
                 f"({sensing}): the filter cannot tell the limit from the measured force and stops each retraction "
-                "at the grasp's travel bound. Calibrate the force sensing (calibrate-wrench, then "
-                "--force-sensing dvrk-calibrated), or raise --max-force-n if the tissue allows it"
+                f"at the grasp's travel bound. Raise --max-force-n above {sensing_error_n:.2f} N if the tissue "
+                f"allows it, or {better}"
             )
         return why
     return f"no setting with a force limit <= {bound:g} N kept its largest observed peak force under {bound:g} N"
@@ -315,7 +321,7 @@ def run(args: argparse.Namespace) -> int:
         alert = ["warnings"] if warnings or run_warnings else []
     else:
         why = _nothing_recommended(results, bound, base, args.force_sensing, sensing_error_n)
-        verdict = f"Nothing recommended: {why}"
+        verdict = "Nothing recommended (why below)"
     summary["warnings"] = run_warnings + [f"weak recommendation: {w}" for w in warnings]
     sensing = (
         args.force_sensing if sensing_error_n is None else f"{args.force_sensing}, error bound {sensing_error_n:.2f} N"
