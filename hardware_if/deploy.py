@@ -76,7 +76,7 @@ from sim.scene3d import PsmScene
 from sim.scene_stream import LiveScene, SceneStream, StreamScene
 from sim.success_interval import describe_success
 from sim.sweep.stopping import handling
-from sim.tissue import TissueParams
+from sim.tissue import SITE_NAMES, TissueParams
 
 __all__ = ["EXIT_HOLD", "EXIT_INTERRUPTED", "STOP_SIGNALS", "DeployOptions", "DeployReport", "Interrupted", "deploy"]
 
@@ -169,6 +169,8 @@ class DeployOptions:
         texture: The flap's texture image file (sim).
         image_timeout_s: With ``perception`` on a dVRK: endoscope images older than this hold the arm [s].
         endoscope_rig: With ``perception`` on a dVRK: the stereo rig's name (``/<rig>/left/image_raw`` ...).
+        camera_site: With ``perception`` on a dVRK: which of the flap's named sites (``centre``, ``left``,
+            ``right``) the episodes grasp; the camera sees all three (MultiSite varies it per episode).
     """
 
     policy: str
@@ -194,12 +196,19 @@ class DeployOptions:
     texture: str | None = None
     image_timeout_s: float = 0.5
     endoscope_rig: str = DEFAULT_RIG
+    camera_site: str = "centre"
 
     def __post_init__(self) -> None:
         if self.site is not None and self.target != "dvrk":
             raise ConfigurationError("site", self.site, "--site with --target dvrk (the simulation sees its tissue)")
         if self.perception is not None and self.site is not None:
             raise ConfigurationError("perception", self.perception, "either --perception or --site/--registration")
+        if self.camera_site not in SITE_NAMES:
+            raise ConfigurationError("camera_site", self.camera_site, f"one of {', '.join(SITE_NAMES)}")
+        if self.camera_site != "centre" and (self.perception is None or self.target != "dvrk"):
+            raise ConfigurationError(
+                "camera_site", self.camera_site, "--camera-site with --perception camera on --target dvrk"
+            )
         if self.goal is not None and self.target != "dvrk":
             raise ConfigurationError("goal", self.goal, "--goal with --target dvrk (the simulation sets its own goal)")
         if self.goal is not None and self.site is None and self.perception is None:
@@ -665,11 +674,15 @@ def _deploy_dvrk(
                 wait_s=options.wait_s,
                 stale_after_s=options.image_timeout_s,
                 goal=None if options.goal is None else np.asarray(options.goal, dtype=float),
+                site=options.camera_site,
             )
             aim = "the task's nominal goal about the seen site"
             if options.goal is not None:
                 aim = format_point(np.asarray(options.goal, dtype=float))
-            echo(f"task state: the site from the endoscope's images on /{listener.rig}/, goal {aim} (no task topics)")
+            echo(
+                f"task state: the flap's {options.camera_site} site from the endoscope's images on /{listener.rig}/, "
+                f"goal {aim} (no task topics)"
+            )
         elif options.site is not None:
             site = np.asarray(options.site, dtype=float)
             goal = sim.envs.nominal_goal(options.task, site) if options.goal is None else np.asarray(options.goal)

@@ -11,10 +11,9 @@ same seeds with the force the console senses (``--force-sensing dvrk``, as ``sim
 - ``blind``: ``sim-dvrk --task T --blind`` and ``deploy --site X Y Z --goal X Y Z`` with the site and goal it
   printed, one console per episode (a registration is of one scene). In-process: ``--blind
   --registration-error-mm 0``.
-- ``camera``: ``sim-dvrk --task T --blind --endoscope`` and ``deploy --perception camera --goal X Y Z`` with
-  the goal it printed, one console per episode (the camera sees the site; the jaw, stalled on the held
-  flap, tells the grasp).
-  In-process: ``--perception camera``.
+- ``camera``: ``sim-dvrk --task T --blind --endoscope`` and ``deploy --perception camera --goal X Y Z
+  --camera-site NAME`` with the goal and site it printed, one console per episode (the camera sees the
+  site; the jaw, stalled on the held flap, tells the grasp). In-process: ``--perception camera``.
 
 Every episode is scored on the console's ground truth, not on what the deploy estimated: with task topics,
 the goal distance the deploy read from them at the episode's end (they are the console's truth); blind and
@@ -150,6 +149,14 @@ class _Console:
                 return line.split()[1:4]
         raise RuntimeError(f"sim-dvrk ended before it printed its {name} (see {self.log.name})")
 
+    def camera_site(self) -> str:
+        """The flap's site the episode grasps, from the start-up line ``for a deploy: ... --camera-site NAME``."""
+        for line in self.process.stdout or ():
+            if line.startswith("for a deploy: "):
+                words = line.split()
+                return words[words.index("--camera-site") + 1]
+        raise RuntimeError(f"sim-dvrk ended before it printed the deploy's arguments (see {self.log.name})")
+
     def stop(self) -> list[dict[str, Any]]:
         """Stop it (Ctrl-C) and return its ground truth, a line per policy period."""
         if self.process.poll() is None:
@@ -276,7 +283,8 @@ def _ros(task: str, mode: str, seeds: Sequence[int], folder: Path, args: argpars
                 if mode == "blind":
                     output = _deploy(task, seed, 1, record, args, "--site", *site, "--goal", *goal)
                 else:
-                    output = _deploy(task, seed, 1, record, args, "--perception", "camera", "--goal", *goal)
+                    named = ("--camera-site", console.camera_site())  # MultiSite grasps another site each episode
+                    output = _deploy(task, seed, 1, record, args, "--perception", "camera", "--goal", *goal, *named)
             finally:
                 truth = console.stop()
             deployed(record, output)

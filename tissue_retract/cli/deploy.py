@@ -130,6 +130,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_perception_argument(parser)
     parser.add_argument(
+        "--camera-site",
+        choices=("centre", "left", "right"),
+        default="centre",
+        help="dvrk with --perception camera: which of the flap's named sites the episodes grasp (default: "
+        "centre; sim-dvrk --blind prints the episode's)",
+    )
+    parser.add_argument(
         "--image-timeout",
         type=float_in(0.0, 60.0, open_low=True),
         default=0.5,
@@ -214,6 +221,7 @@ def run(args: argparse.Namespace) -> int:
         live=args.live,
         site=None if site is None else tuple(site),
         goal=None if args.goal is None else tuple(args.goal),
+        camera_site=args.camera_site,
         force_sensing=args.force_sensing,
         force_sensing_error_n=sensing_error_n,
         force_sensing_source=sensing_source,

@@ -192,9 +192,11 @@ def run(args: argparse.Namespace) -> int:
                     print(f"{name}: {format_point(state[name])}", flush=True)
                 # A deploy without --goal aims at the task's nominal goal about the site it is given, which
                 # differs from this scene's goal by the registration's error: one goal, given once.
+                # The flap's named site the episode grasps: a camera sees all three, the user says which.
                 print(
-                    f"for a deploy: --goal {format_point(state['goal'])} (the scene's goal; without --goal a "
-                    "deploy aims at the task's nominal goal about the registered site)",
+                    f"for a deploy: --goal {format_point(state['goal'])} --camera-site {task.env.site} (the "
+                    "scene's goal and which of the flap's sites it grasps; without --goal a deploy aims at the "
+                    "task's nominal goal about the site)",
                     flush=True,
                 )
                 node.get_logger().info(f"task {args.task!r} scene (seed {args.seed}), blind: no task topics")
