@@ -456,6 +456,12 @@ def _blind_cases(tmp: Path) -> list[Case]:
         Case("site-in-sim", (*deploy, "--target", "sim", "--site", "0", "0", "0.02"), ("site", "--target dvrk")),
         Case("site-nan", (*deploy, "--target", "dvrk", "--site", "nan", "0", "0"), ("--site", "nan", "[-1, 1]")),
         Case("goal-without-site", (*deploy, "--target", "dvrk", "--goal", "0", "0", "0.04"), ("goal", "--site")),
+        Case("goal-in-sim", (*deploy, "--target", "sim", "--goal", "0", "0", "0.04"), ("goal", "--target dvrk")),
+        Case(
+            "camera-site-without-camera",
+            (*deploy, "--target", "dvrk", "--camera-site", "left"),
+            ("camera_site", "--perception camera"),
+        ),
         Case(
             "registration-garbage",
             (*deploy, "--target", "dvrk", "--registration", str(registration)),
