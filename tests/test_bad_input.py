@@ -458,7 +458,7 @@ def _blind_cases(tmp: Path) -> list[Case]:
         Case("goal-without-site", (*deploy, "--target", "dvrk", "--goal", "0", "0", "0.04"), ("goal", "--site")),
         Case("goal-in-sim", (*deploy, "--target", "sim", "--goal", "0", "0", "0.04"), ("goal", "--target dvrk")),
         Case(
-            "camera-site-without-camera",
+            "site-camera-without-camera",
             (*deploy, "--target", "dvrk", "--camera-site", "left"),
             ("camera_site", "--perception camera"),
         ),
