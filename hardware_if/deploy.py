@@ -666,6 +666,7 @@ def _deploy_dvrk(
             from policies.perception import load_site_estimator  # torch's network: only where the camera is used
 
             estimator = load_site_estimator(options.perception.partition(":")[2] or None)
+            given = None if options.goal is None else np.asarray(options.goal, dtype=float)
             listener = CameraSite(
                 options.task,
                 estimator,
@@ -673,12 +674,10 @@ def _deploy_dvrk(
                 rig=options.endoscope_rig,
                 wait_s=options.wait_s,
                 stale_after_s=options.image_timeout_s,
-                goal=None if options.goal is None else np.asarray(options.goal, dtype=float),
+                goal=given,
                 site=options.camera_site,
             )
-            aim = "the task's nominal goal about the seen site"
-            if options.goal is not None:
-                aim = format_point(np.asarray(options.goal, dtype=float))
+            aim = "the task's nominal goal about the seen site" if given is None else format_point(given)
             echo(
                 f"task state: the flap's {options.camera_site} site from the endoscope's images on /{listener.rig}/, "
                 f"goal {aim} (no task topics)"

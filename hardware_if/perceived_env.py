@@ -57,9 +57,9 @@ class PerceivedTask(RegisteredTask):
         frame = task.render_endoscope(Appearance.sample(rng, task.config.endoscope), rng)
         site = np.asarray(self.estimator.world_sites(frame, task.site)[SITE_NAMES.index(task.site)])
         info["site_error_mm"] = float(1000.0 * np.linalg.norm(site - task.site_position()))
-        choice = getattr(self.estimator, "last_choice", "")
-        if choice:  # the default estimator chose one of the two shipped ones for this flap
-            info["site_estimator"] = choice.split(" ", 1)[0]
+        taken = getattr(self.estimator, "last_taken", "")
+        if taken:  # the default estimator chose one of the two shipped ones for this flap
+            info["site_estimator"] = taken
         return site
 
 

@@ -25,21 +25,22 @@ from policies.perception.network import SiteEstimator, load_estimator
 from sim.endoscope import StereoFrame
 from sim.tissue import SITE_NAMES
 
-__all__ = ["AGREE_M", "PINK", "SiteChooser", "load_site_estimator"]
+__all__ = ["AGREE_M", "ANY_COLOUR", "PINK", "SiteChooser", "load_site_estimator"]
 
 #: Largest distance between the two estimators' sites at which the pink one's is taken [m]. On the tasks'
 #: pink flaps their sites lay 1.3 mm apart (median; p95 2.8 mm over 40 frames); 3 mm let the pink one's
 #: site through on the yellow flap where it was 4-8 mm off (87 % against 89 % at 2 mm).
 AGREE_M = 0.002
-#: The name ``--perception camera:pink`` takes for the pink-trained estimator alone.
-PINK = "pink"
+#: The names ``--perception camera:NAME`` takes for either shipped estimator alone.
+PINK, ANY_COLOUR = "pink", "any-colour"
 
 
 class SiteChooser:
     """The pink-trained estimator where the any-colour one agrees within ``agree_m``, else the any-colour one.
 
     It reads as a :class:`~policies.perception.SiteEstimator` does (``endoscope``, ``mark_sites``,
-    ``info``, ``world_sites``) and says which it took for the last frame (:attr:`last_choice`).
+    ``info``, ``world_sites``) and says which it took for the last frame (:attr:`last_taken`, and why:
+    :attr:`last_choice`).
 
     Args:
         pink: The estimator trained on the tasks' pink flaps.
@@ -53,7 +54,10 @@ class SiteChooser:
         self.pink, self.any_colour, self.agree_m = pink, any_colour, float(agree_m)
         self.endoscope = pink.endoscope
         self.info: dict[str, Any] = {"chooser": True, "any_colour": True, "agree_m": self.agree_m}
-        self.last_choice = ""
+        #: ``pink`` or ``any-colour``: the estimator whose sites the last frame gave ("" before the first).
+        self.last_taken = ""
+        #: How far apart the two estimators' deciding sites lay on the last frame [m].
+        self.last_apart_m = float("nan")
 
     @property
     def mark_sites(self) -> bool:
@@ -70,20 +74,27 @@ class SiteChooser:
         """
         pink, other = self.pink.world_sites(frame), self.any_colour.world_sites(frame)
         apart = np.linalg.norm(pink - other, axis=1)
-        distance = float(apart[SITE_NAMES.index(site)] if site is not None else apart.max())
-        if distance <= self.agree_m:
-            self.last_choice = f"pink (the any-colour estimator agrees within {1000 * distance:.1f} mm)"
-            return pink
-        self.last_choice = (
-            f"any-colour (the pink estimator's site is {1000 * distance:.1f} mm from it, over "
-            f"{1000 * self.agree_m:g} mm: the flap does not look like the pink training flaps)"
-        )
-        return other
+        self.last_apart_m = float(apart[SITE_NAMES.index(site)] if site is not None else apart.max())
+        self.last_taken = PINK if self.last_apart_m <= self.agree_m else ANY_COLOUR
+        return pink if self.last_taken == PINK else other
+
+    @property
+    def last_choice(self) -> str:
+        """Which estimator the last frame took, and why ("" before the first frame)."""
+        distance_mm = 1000 * self.last_apart_m
+        if self.last_taken == PINK:
+            return f"pink (the any-colour estimator agrees within {distance_mm:.1f} mm)"
+        if self.last_taken == ANY_COLOUR:
+            return (
+                f"any-colour (the pink estimator's site is {distance_mm:.1f} mm from it, over "
+                f"{1000 * self.agree_m:g} mm: the flap does not look like the pink training flaps)"
+            )
+        return ""
 
 
 def load_site_estimator(name: str | None = None) -> SiteChooser | SiteEstimator:
     """What ``--perception camera[:NAME]`` runs: None, the :class:`SiteChooser` of the two shipped estimators;
     ``pink`` or ``any-colour``, that shipped one alone; otherwise a model file (:func:`load_estimator`)."""
     if name is None:
-        return SiteChooser(load_estimator(None), load_estimator("any-colour"))
-    return load_estimator(None if name == PINK else name)
+        return SiteChooser(load_estimator(PINK), load_estimator(ANY_COLOUR))
+    return load_estimator(name)  # ``pink`` and ``any-colour`` are names of SHIPPED_MODELS
