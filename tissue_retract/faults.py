@@ -250,8 +250,18 @@ FAULTS: tuple[Fault, ...] = (
     Fault("policy returns NaN", "dvrk", "ReturnsNan", 4, "invalid action"),
     Fault("policy wrong shape", "dvrk", "WrongShape", 4, "invalid action: shape (3,)"),
     Fault("policy overrun (2 s)", "dvrk", "Slow", 4, "policy overrun", default_budget=True),
+    # Another node's NaN is also a second source of that sensor (of measured_js: a second console): the deploy
+    # holds on whichever it sees first.
     *(
-        Fault(f"NaN on {topic}", "dvrk", "Gate", 4, f"invalid data: {topic}", action=f"nan:{topic}")
+        Fault(
+            f"NaN on {topic}",
+            "dvrk",
+            "Gate",
+            4,
+            f"invalid data: {topic}",
+            action=f"nan:{topic}",
+            also=(f"another source: /PSM1/{topic} ", *(("another console: /PSM1",) if topic == "measured_js" else ())),
+        )
         for topic in (
             "measured_js",
             "setpoint_js",
@@ -556,25 +566,15 @@ class _Injector:
 
         return convert.joint_state(JOINT_NAMES, [3.0, 0.0, 0.1, 0.0, 0.0, 0.0])
 
-    def flood(self, publisher: Any, message: Any, lines: _Lines, text: str | tuple[str, ...], timeout_s: float) -> bool:
-        """Publish ``message`` until the deploy's output shows ``text`` or one of them (the client saw it)."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and not lines.ended:
-            if publisher.get_subscription_count() > 0:
-                publisher.publish(message)
-            if lines.wait_for(text, 0.002):
-                return True
-        return False
-
-    def flood_all(
-        self, pairs: list[tuple[Any, Any]], lines: _Lines, text: str | tuple[str, ...], timeout_s: float
-    ) -> bool:
-        """Publish every ``(publisher, message)`` until the deploy's output shows ``text`` or one of them."""
+    def flood(self, pairs: list[tuple[Any, Any]], lines: _Lines, text: str | tuple[str, ...], timeout_s: float) -> bool:
+        """Publish every ``(publisher, message)`` that has a subscriber until the deploy's output shows ``text``
+        or one of them (the client saw it)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline and not lines.ended:
             for publisher, message in pairs:
-                publisher.publish(message)
-            if lines.wait_for(text, 0.01):
+                if publisher.get_subscription_count() > 0:
+                    publisher.publish(message)
+            if lines.wait_for(text, 0.002):
                 return True
         return False
 
@@ -696,16 +696,16 @@ def _run_fault_in(
         if fault.action.startswith(("nan:", "early:")) and injector is not None:
             topic = fault.action.split(":", 1)[1]
             publisher, message = injector.publisher(topic)
-            injector.flood(publisher, message, lines, "invalid data", guard_s)
+            injector.flood([(publisher, message)], lines, ("invalid data", *fault.also), guard_s)
         elif fault.action == "rogue" and injector is not None:
             publisher, _ = injector.publisher("servo_jp")
-            injector.flood(publisher, injector.moved_message(), lines, "another commander", guard_s)
+            injector.flood([(publisher, injector.moved_message())], lines, "another commander", guard_s)
         elif fault.action in ("second-force", "second-camera", "dead-camera") and injector is not None:
             if fault.action == "dead-camera" and console is not None:
-                os.kill(_render_pid(lines, console), signal.SIGKILL)
+                os.kill(_render_pid(console), signal.SIGKILL)
             pairs = injector.zero_force() if fault.action == "second-force" else injector.images()
             # The client holds as soon as it sees the second source (the policy waits at the gate meanwhile).
-            injector.flood_all(pairs, lines, ("another source", *fault.also), guard_s)
+            injector.flood(pairs, lines, ("another source", *fault.also), guard_s)
         elif fault.action == "second-deploy":
             second = _start([*deploy[: deploy.index("--record")], "--record", str(workdir / "second.mcap")], env)
             second.wait(timeout=guard_s)
@@ -713,12 +713,12 @@ def _run_fault_in(
         elif fault.action == "tracking" and injector is not None:
             publisher, _ = injector.publisher("setpoint_js")
             held = tuple(f"holding, {reason}" for reason in (fault.reason, *fault.also))
-            injector.flood(publisher, injector.tracking_message(), lines, held, guard_s)
+            injector.flood([(publisher, injector.tracking_message())], lines, held, guard_s)
         elif fault.action == "disable" and injector is not None:
             publisher, message = injector.publisher("state_command")
             # The injector both disables and commands the arm: the deploy holds on whichever it sees first.
             held = tuple(f"holding, {reason}" for reason in (fault.reason, *fault.also))
-            injector.flood(publisher, message, lines, held, guard_s)
+            injector.flood([(publisher, message)], lines, held, guard_s)
         elif fault.action == "kill-console" and console is not None:
             console.kill()
             console.wait()
@@ -758,8 +758,8 @@ def _spin_until_closed(executor: Any, injector: _Injector) -> None:
 
 def _calibration_file(action: str, workdir: Path) -> Path:
     """A calibration file a deploy must not trust: its force overflows (``calibration``: finite parameters,
-    one of them 1e300, an effort offset), it is PSM2's (``other-arm``), or it was fitted where the console
-    reports the exact force (``exact-sensing``)."""
+    one of them 1e300, an effort offset), it is PSM2's (``other-arm``), it was fitted where the console
+    reports the exact force (``exact-sensing``), or on a real dVRK (``other-console``)."""
     from hardware_if.wrench_calibration import EXACT_SENSING, WrenchCalibration
     from psm_control.effort_model import EffortRegressor
 
@@ -778,7 +778,7 @@ def _calibration_file(action: str, workdir: Path) -> Path:
     return path
 
 
-def _render_pid(lines: _Lines, console: subprocess.Popen[str]) -> int:
+def _render_pid(console: subprocess.Popen[str]) -> int:
     """The endoscope's render process of a ``sim-dvrk --endoscope``, from the line it printed at its start."""
     for line in console.stdout or ():
         if line.startswith("endoscope: ") and "render process " in line:
