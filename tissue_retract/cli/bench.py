@@ -20,6 +20,7 @@ TARGETS: dict[str, str] = {
     "rehearsal": "the shipped policy deployed through ROS against sim-dvrk beside the same policy in-process",
     "faults": "the deploy's fault matrix: fault -> exit status, hold reason, what the recording kept",
     "safety": "the force bound: adversarial and shipped policies x tasks x force presets x tissue stiffness",
+    "sensing": "the force-sensing models' free-space error beside real PSMs' logs, by depth and speed",
     "train": "the default recipe's wall time to a policy confirmed on 100 unseen episodes, per task",
 }
 

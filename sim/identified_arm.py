@@ -1,0 +1,123 @@
+"""A real PSM's free-space joint efforts, identified from its public logs: what the force-sensing model adds.
+
+The console's ``measured_cf`` is ``pinv(J^T) tau`` of the measured efforts, and in free space those efforts are
+the arm's own dynamics: inertia, Coriolis, link and instrument gravity with the counterweight, friction and
+offsets. :class:`IdentifiedArm` holds one real arm's, as a parameter vector on the columns of
+:class:`psm_control.effort_model.EffortRegressor` (Pinocchio's joint torque regressor, gravity along three
+axes, friction and offsets per joint), and what the identification left unexplained on a log it was not
+fitted on: a per-joint residual with a correlation time (drawn as a coloured noise).
+
+``tissue-retract bench sensing`` sets it beside the sensing presets of :mod:`sim.force_sensing` on real
+logs: on the WPI PSM's held-out log it reproduces the console's free-space error by insertion depth and
+tip speed, where the ``dvrk`` preset is 5-8 times below it.
+
+The shipped arm (:data:`ARM_FILES`) is fitted by ``tissue-retract bench sensing --write-arm`` on the WPI
+PSM's excitation logs (WPI-AIM/dvrk_dynamics_identification, ``data/psm/measured_trajectory``); the file
+records the command, the logs and the held-out figures. The logs themselves are not shipped (they have no
+licence): only the fitted numbers are.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psm_control.effort_model import EffortRegressor
+from psm_control.errors import UnknownVariantError
+
+__all__ = ["ARM_FILES", "IdentifiedArm", "identified_arm"]
+
+#: The identified arms shipped with the package, by name (files in ``sim/data``).
+ARM_FILES = {"wpi-psm": "identified_arm_wpi_psm.json"}
+
+
+@functools.cache
+def _regressor() -> EffortRegressor:
+    return EffortRegressor()  # one Pinocchio model and data per process
+
+
+@dataclass(frozen=True)
+class IdentifiedArm:
+    """One PSM's identified free-space efforts (see the module notes).
+
+    Attributes:
+        name: Its name (a key of :data:`ARM_FILES`, or a file's stem).
+        columns: The regressor's identified columns.
+        parameters: Their values.
+        residual: Standard deviation of what the identification left per joint on a held-out log
+            (6,) [N m, N for the insertion].
+        residual_time_s: The residual's correlation time (its autocorrelation's 1/e lag, the median over
+            the joints) [s].
+        provenance: Where the numbers come from: the command, the logs fitted and held out, the figures.
+    """
+
+    name: str
+    columns: tuple[int, ...]
+    parameters: tuple[float, ...]
+    residual: tuple[float, ...]
+    residual_time_s: float
+    provenance: str
+
+    @functools.cached_property
+    def _vector(self) -> np.ndarray:
+        full = np.zeros(_regressor().columns)
+        full[list(self.columns)] = self.parameters
+        return full
+
+    def efforts(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """The arm's free-space joint efforts (6,) at ``q, qd, qdd``."""
+        return np.asarray(_regressor().rows(q, qd, qdd) @ self._vector)
+
+    def inertial_efforts(self, q: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """The part of :meth:`efforts` the acceleration makes, ``M(q) qdd`` (6,): what a calibration that is
+        given no acceleration (a deploy's, from single ``measured_js`` messages) leaves."""
+        zero = np.zeros(6)
+        rows = _regressor().rows
+        return np.asarray((rows(q, zero, qdd) - rows(q, zero, zero)) @ self._vector)
+
+    def to_json(self) -> dict[str, Any]:
+        """The file's content."""
+        return {
+            "kind": "identified_arm",
+            "name": self.name,
+            "columns": list(self.columns),
+            "parameters": list(self.parameters),
+            "residual": list(self.residual),
+            "residual_time_s": self.residual_time_s,
+            "provenance": self.provenance,
+        }
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> IdentifiedArm:
+        """An arm from :meth:`to_json`'s content."""
+        return cls(
+            name=str(data["name"]),
+            columns=tuple(int(c) for c in data["columns"]),
+            parameters=tuple(float(v) for v in data["parameters"]),
+            residual=tuple(float(v) for v in data["residual"]),
+            residual_time_s=float(data["residual_time_s"]),
+            provenance=str(data["provenance"]),
+        )
+
+    def write(self, path: Path) -> None:
+        """Write the arm as JSON."""
+        path.write_text(json.dumps(self.to_json(), indent=2) + "\n", encoding="utf-8")
+
+
+@functools.cache
+def identified_arm(name: str) -> IdentifiedArm:
+    """The shipped identified arm called ``name``.
+
+    Raises:
+        UnknownVariantError: No such arm (the error lists them).
+    """
+    if name not in ARM_FILES:
+        raise UnknownVariantError("identified arm", name, list(ARM_FILES))
+    text = resources.files("sim").joinpath("data", ARM_FILES[name]).read_text(encoding="utf-8")
+    return IdentifiedArm.from_json(json.loads(text))

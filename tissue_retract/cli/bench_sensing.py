@@ -1,0 +1,240 @@
+"""``tissue-retract bench sensing``: the force-sensing models' free-space error beside real PSMs' logs.
+
+On a free-space joint log (nothing touches the tool, so the console's whole estimate is error) it prints,
+by insertion depth and tool-tip speed, the RMS of:
+
+* the real console's estimate, ``pinv(J^T) tau`` of the logged efforts, as the console computes it;
+* the ``dvrk`` sensing preset's estimate along the same motion (:mod:`sim.force_sensing`);
+* an identified arm's (:mod:`sim.identified_arm`) along the same motion: its free-space efforts and its
+  residual, drawn as the model draws it.
+
+With ``--calibration F.json`` (a ``calibrate-wrench`` file fitted on another log) it prints the same for what
+a calibrated deploy reads, with no acceleration: the calibrated error on the log, the ``dvrk-calibrated``
+preset's, and the identified arm's inertia and residual. Ratios are model over real: the presets' error
+statistics should be within 25 % of the real ones (0.75-1.25) in the bins a log covers.
+
+With ``--write-arm OUT.json --held-out LOG`` it first identifies an arm: ``calibrate-wrench``'s model fitted
+on the ``--from`` logs, its residual (spread and correlation time per joint) measured on the held-out log,
+written as :mod:`sim.identified_arm` reads it; then it compares on the held-out log. The shipped
+``sim/data/identified_arm_wpi_psm.json`` was written so from the WPI PSM's logs (its ``provenance``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hardware_if.joint_logs import read_joint_log
+from hardware_if.wrench_calibration import (
+    DEPTH_BINS_M,
+    SPEED_BINS_M_S,
+    PreparedLog,
+    check_calibration,
+    fit_calibration,
+    prepare_log,
+    read_calibration,
+)
+from psm_control.errors import ConfigurationError
+from psm_control.robot import PsmModel
+from sim.force_sensing import ForceSensor, sensing_params
+from sim.identified_arm import ARM_FILES, IdentifiedArm, identified_arm
+from sim.strict_json import write_strict_json
+from tissue_retract.cli._checks import output_file
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the target's options."""
+    parser.add_argument(
+        "--from",
+        dest="logs",
+        nargs="+",
+        required=True,
+        metavar="PATH",
+        help="free-space joint logs (as calibrate-wrench --from reads them)",
+    )
+    parser.add_argument("--arm", default="PSM1", help="arm namespace in bags (default: PSM1)")
+    parser.add_argument("--rate", type=float, default=None, help="sample rate of CSV logs [Hz] (default by layout)")
+    parser.add_argument(
+        "--identified-arm",
+        default="wpi-psm",
+        choices=sorted(ARM_FILES),
+        help="the identified arm to compare (default: wpi-psm)",
+    )
+    parser.add_argument(
+        "--calibration",
+        metavar="F.json",
+        default=None,
+        help="also compare what a deploy calibrated by this file reads (fit it on another log)",
+    )
+    parser.add_argument(
+        "--write-arm",
+        metavar="OUT.json",
+        type=output_file("--write-arm"),
+        default=None,
+        help="identify an arm on the --from logs, its residual on --held-out, and write it",
+    )
+    parser.add_argument(
+        "--held-out", nargs="+", metavar="PATH", default=None, help="with --write-arm: logs to check on"
+    )
+
+
+def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
+    """Identify an arm on the ``--from`` logs, measure its residual on ``--held-out``, write it."""
+    if not args.held_out:
+        raise ConfigurationError("--held-out", None, "logs of the same arm to measure the residual on")
+    fit = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.logs]
+    held_out = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.held_out]
+    calibration, _ = fit_calibration(args.arm, fit, held_out)
+    vector = np.zeros(held_out[0].rows.shape[2])
+    vector[list(calibration.columns)] = calibration.parameters
+    residual = np.concatenate([p.log.effort - p.rows @ vector for p in held_out])
+    lags = []
+    for joint in range(6):  # the 1/e lag of each joint's residual autocorrelation
+        x = residual[:, joint] - residual[:, joint].mean()
+        correlation = np.correlate(x, x, "full")[len(x) - 1 :] / max(float(x @ x), 1e-30)
+        lags.append(int(np.argmax(correlation < math.exp(-1.0))) / held_out[0].log.rate_hz)
+    name = Path(args.write_arm).stem.removeprefix("identified_arm_").replace("_", "-")
+    arm = IdentifiedArm(
+        name=name,
+        columns=calibration.columns,
+        parameters=calibration.parameters,
+        residual=tuple(float(v) for v in residual.std(axis=0)),
+        residual_time_s=float(np.median(lags)),
+        provenance=(
+            f"tissue-retract bench sensing --from {' '.join(Path(p).name for p in args.logs)} --held-out "
+            f"{' '.join(Path(p).name for p in args.held_out)} --write-arm {Path(args.write_arm).name}: "
+            f"{len(calibration.parameters)} parameters on {calibration.samples} samples; held out, the console's "
+            f"free-space error {calibration.rms_before_n:.2f} N RMS, the arm's residual {calibration.rms_after_n:.2f} N"
+        ),
+    )
+    arm.write(Path(args.write_arm))
+    print(f"identified arm written to {args.write_arm}: {arm.provenance}")
+    return arm, list(args.held_out)
+
+
+def _residual(arm: IdentifiedArm, samples: int, dt_s: float, rng: np.random.Generator) -> np.ndarray:
+    """The identified arm's residual efforts along ``samples`` ticks (N, 6), as the sensing model draws it."""
+    std = np.asarray(arm.residual)
+    decay = math.exp(-dt_s / arm.residual_time_s)
+    out = np.zeros((samples, 6))
+    state = std * rng.standard_normal(6)
+    for k in range(samples):
+        state = decay * state + std * math.sqrt(1.0 - decay * decay) * rng.standard_normal(6)
+        out[k] = state
+    return out
+
+
+def _norms(log: PreparedLog, efforts: np.ndarray) -> np.ndarray:
+    """The console's force magnitude of ``efforts`` (N, 6) per sample, on the joints the log carries."""
+    return np.linalg.norm(np.einsum("kij,kj->ki", log.projector, efforts * log.joint_mask), axis=1)
+
+
+def _preset_errors(log: PreparedLog, preset: str) -> np.ndarray:
+    """A sensing preset's free-space error along the log's motion (N,) [N]."""
+    sensor = ForceSensor(sensing_params(preset), np.random.default_rng(0))
+    configuration = PsmModel().configuration()
+    dt_s = 1.0 / log.log.rate_hz
+    efforts = np.zeros((len(log.log.q), 6))
+    for k, q in enumerate(log.log.q):
+        configuration.update(q)
+        efforts[k] = sensor.efforts(configuration, log.qd[k], np.zeros(3), dt_s)
+    return _norms(log, efforts)
+
+
+def _rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def _bins(key: np.ndarray, edges: tuple[float, ...], columns: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+    rows = []
+    for low, high in itertools.pairwise(edges):
+        inside = (key >= low) & (key < high)
+        if np.any(inside):
+            rows.append(
+                {"bin": [low, high if math.isfinite(high) else None], "samples": int(inside.sum())}
+                | {name: _rms(values[inside]) for name, values in columns.items()}
+            )
+    return rows
+
+
+def _table(title: str, rows: list[dict[str, Any]], names: list[str], unit: str) -> list[str]:
+    lines = [f"  {title:<14} {'samples':>7}  " + "  ".join(f"{n:>22}" for n in names)]
+    for row in rows:
+        low, high = row["bin"]
+        scale = 100.0 if unit == "cm" else 1.0
+        label = f"{low * scale:g}-{high * scale:g} {unit}" if high is not None else f">= {low * scale:g} {unit}"
+        real = row[names[0]]
+        cells = [f"{real:22.2f}"] + [f"{row[n]:13.2f} ({row[n] / real:4.2f} x)" for n in names[1:]]
+        lines.append(f"  {label:<14} {row['samples']:>7}  " + "  ".join(cells))
+    return lines
+
+
+def _compare(log: PreparedLog, columns: dict[str, np.ndarray]) -> dict[str, Any]:
+    names = list(columns)
+    return {
+        "samples": len(log.log.q),
+        "rms_n": {name: _rms(values) for name, values in columns.items()},
+        "by_depth": _bins(log.insertion_m, DEPTH_BINS_M, columns),
+        "by_speed": _bins(log.tip_speed_m_s, SPEED_BINS_M_S, columns),
+        "columns": names,
+    }
+
+
+def _print(title: str, result: dict[str, Any]) -> None:
+    names = result["columns"]
+    overall = ", ".join(f"{n} {result['rms_n'][n]:.2f}" for n in names)
+    print(f"{title} ({result['samples']} samples), RMS [N]: {overall}")
+    print("\n".join(_table("insertion", result["by_depth"], names, "cm")))
+    print("\n".join(_table("tip speed", result["by_speed"], names, "m/s")))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Measure and print."""
+    if args.write_arm:
+        arm, paths = _write_arm(args)
+    else:
+        arm, paths = identified_arm(args.identified_arm), list(args.logs)
+    calibration = read_calibration(args.calibration, exact_console=True) if args.calibration else None
+    results: dict[str, Any] = {"identified_arm": arm.name, "logs": {}}
+    for path in paths:
+        log = prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate))
+        dt_s = 1.0 / log.log.rate_hz
+        residual = _residual(arm, len(log.log.q), dt_s, np.random.default_rng(0))
+        vector = np.zeros(log.rows.shape[2])
+        vector[list(arm.columns)] = arm.parameters
+        full = log.rows @ vector
+        inertia = full - log.rows_static @ vector
+        entry = {
+            "console": _compare(
+                log,
+                {
+                    "real console": _norms(log, log.log.effort),
+                    "dvrk preset": _preset_errors(log, "dvrk"),
+                    f"{arm.name}": _norms(log, full + residual),
+                },
+            )
+        }
+        _print(f"{path}: the console's free-space estimate", entry["console"])
+        if calibration is not None:
+            error = check_calibration(calibration, [log])
+            entry["calibrated"] = _compare(
+                log,
+                {
+                    "real, calibrated": error.after_live_n,
+                    "dvrk-calibrated": _preset_errors(log, "dvrk-calibrated"),
+                    f"{arm.name} inertia": _norms(log, inertia + residual),
+                },
+            )
+            _print(f"{path}: calibrated by {args.calibration}, no acceleration (a deploy)", entry["calibrated"])
+        results["logs"][path] = entry
+    if args.json:
+        write_strict_json(args.json, results)
+        print(f"written to {args.json}")
+    return 0
