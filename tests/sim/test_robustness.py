@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from psm_control.errors import ConfigurationError
 from sim.randomization import DEFAULT_RANGES, Randomizer
 from tests.sim.conftest import make_env
 
@@ -16,6 +17,14 @@ def test_same_seed_same_parameters() -> None:
     b = randomizer.sample(np.random.default_rng(4), {"tissue_density_kg_m3": 1050.0})
     assert a == b and a["tissue_density_kg_m3"] == 1050.0
     assert set(a) == set(DEFAULT_RANGES)
+
+
+def test_a_log_uniform_range_must_lie_above_zero() -> None:
+    """Log-uniform draws of a range reaching 0, or of a whole-number parameter, are refused by name."""
+    with pytest.raises(ConfigurationError, match="tissue_damping"):
+        Randomizer({"tissue_damping": (0.0, 0.1)}, log_uniform={"tissue_damping"})
+    with pytest.raises(ConfigurationError, match="action_latency_steps"):
+        Randomizer({"action_latency_steps": (1.0, 3.0)}, log_uniform={"action_latency_steps"})
 
 
 @pytest.mark.slow
