@@ -23,17 +23,10 @@ from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig, load_safety_config
 from sim.envs import gym_id
 from sim.evaluation import describe_exceedances, describe_stalls
-from sim.robustness import (
-    check_relative_ranges,
-    integer_parameters,
-    parameter_unit_labels,
-    parameter_units,
-    sweep_parameters,
-    sweep_ranges,
-)
+from sim.robustness import parse_vary, sweep_ranges
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success
-from sim.sweep import EpisodeStore, cap_jobs, file_digest, make_trials, parse_ranges, prepare_output, run_trials
+from sim.sweep import EpisodeStore, cap_jobs, file_digest, make_trials, prepare_output, run_trials
 from sim.sweep.report import summarize, write_report
 from tissue_retract.cli._camera import (
     add_perception_argument,
@@ -146,14 +139,7 @@ def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write its files, print its summary."""
     task_id = gym_id(args.task)
-    ranges = parse_ranges(
-        args.vary,
-        valid_names=sweep_parameters(),
-        units=parameter_units(),
-        integers=integer_parameters(),
-        unit_labels=parameter_unit_labels(),
-    )
-    check_relative_ranges(ranges)
+    ranges = parse_vary(args.vary)
     count = args.trials ** len(ranges) if args.mode == "grid" else args.trials
     if count > MAX_TRIALS:
         raise ConfigurationError(
