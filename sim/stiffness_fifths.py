@@ -59,20 +59,21 @@ class StiffnessFifth:
         stiffness_high_kpa: The greatest [kPa].
         trials: Its trials (finished episodes of the policy).
         successes: The policy's successful episodes among them.
-        force_limit_stalls: The policy's episodes the force limit stopped.
+        force_limit_stall_episodes: The policy's episodes the force limit stopped (failure class
+            ``force_limit_stall``; not the stall events a summary's ``force_limit_stalls`` counts).
         expert_trials: The scripted expert's finished episodes of the same trials (None: no expert pass).
         expert_successes: The expert's successful episodes among them.
-        expert_force_limit_stalls: The expert's episodes the force limit stopped.
+        expert_force_limit_stall_episodes: The expert's episodes the force limit stopped.
     """
 
     stiffness_low_kpa: float
     stiffness_high_kpa: float
     trials: int
     successes: int
-    force_limit_stalls: int
+    force_limit_stall_episodes: int
     expert_trials: int | None = None
     expert_successes: int | None = None
-    expert_force_limit_stalls: int | None = None
+    expert_force_limit_stall_episodes: int | None = None
 
     @property
     def thin(self) -> bool:
@@ -88,8 +89,8 @@ class StiffnessFifth:
             "thin": self.thin,
             "successes": self.successes,
             "success": self.successes / self.trials,
-            "force_limit_stalls": self.force_limit_stalls,
-            "force_limit_stall": self.force_limit_stalls / self.trials,
+            "force_limit_stall_episodes": self.force_limit_stall_episodes,
+            "force_limit_stall": self.force_limit_stall_episodes / self.trials,
         }
         if self.expert_trials is not None:
             out.update(
@@ -97,8 +98,8 @@ class StiffnessFifth:
                     "expert_trials": self.expert_trials,
                     "expert_successes": self.expert_successes,
                     "expert_success": _share(self.expert_successes, self.expert_trials),
-                    "expert_force_limit_stalls": self.expert_force_limit_stalls,
-                    "expert_force_limit_stall": _share(self.expert_force_limit_stalls, self.expert_trials),
+                    "expert_force_limit_stall_episodes": self.expert_force_limit_stall_episodes,
+                    "expert_force_limit_stall": _share(self.expert_force_limit_stall_episodes, self.expert_trials),
                 }
             )
         return out
@@ -127,7 +128,7 @@ def by_stiffness_fifth(
             stiffness_high_kpa=members[-1][0],
             trials=len(members),
             successes=sum(bool(r.get("success")) for _, _, r in members),
-            force_limit_stalls=sum(_stalled(r) for _, _, r in members),
+            force_limit_stall_episodes=sum(_stalled(r) for _, _, r in members),
         )
         if expert is not None:
             beside = [expert[index] for _, index, _ in members if index in expert]
@@ -135,7 +136,7 @@ def by_stiffness_fifth(
                 fifth,
                 expert_trials=len(beside),
                 expert_successes=sum(bool(r.get("success")) for r in beside),
-                expert_force_limit_stalls=sum(_stalled(r) for r in beside),
+                expert_force_limit_stall_episodes=sum(_stalled(r) for r in beside),
             )
         fifths.append(fifth)
     return fifths
@@ -154,6 +155,6 @@ def expert_summary(expert_records: Sequence[Mapping[str, Any]]) -> dict[str, Any
         "expert_successes": successes,
         "expert_success": _share(successes, total),
         "expert_ci95": list(wilson_interval(successes, total)),
-        "expert_force_limit_stalls": stalls,
+        "expert_force_limit_stall_episodes": stalls,
         "expert_force_limit_stall": _share(stalls, total),
     }

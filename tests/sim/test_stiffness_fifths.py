@@ -46,7 +46,7 @@ def test_fifths_partition_the_finished_trials_in_stiffness_order(
     assert all(f.stiffness_low_kpa <= f.stiffness_high_kpa for f in fifths)
     assert all(a.stiffness_high_kpa <= b.stiffness_low_kpa for a, b in itertools.pairwise(fifths))
     assert sum(f.successes for f in fifths) == sum(r["success"] for r in finished)
-    assert sum(f.force_limit_stalls for f in fifths) == sum(r["failure_class"] == STALL for r in finished)
+    assert sum(f.force_limit_stall_episodes for f in fifths) == sum(r["failure_class"] == STALL for r in finished)
     expert_done = {r["index"]: r for r in expert_records if "error" not in r}
     beside = [expert_done[r["index"]] for r in finished if r["index"] in expert_done]
     assert sum(f.expert_trials or 0 for f in fifths) == len(beside)
@@ -54,7 +54,8 @@ def test_fifths_partition_the_finished_trials_in_stiffness_order(
     for f in fifths:
         row = f.to_dict()
         assert row["thin"] == (f.trials < THIN_BIN_EPISODES)
-        assert row["success"] == f.successes / f.trials and row["force_limit_stall"] == f.force_limit_stalls / f.trials
+        assert row["success"] == f.successes / f.trials
+        assert row["force_limit_stall"] == f.force_limit_stall_episodes / f.trials
 
 
 def test_without_an_expert_pass_the_fifths_have_no_expert_fields() -> None:
