@@ -295,12 +295,12 @@ def run(args: argparse.Namespace) -> int:
     Console(width=110).print(table)
     print(f"report: {out / 'report.html'}")
     status = 0
-    for who, kept, file in ((args.policy, records, "episodes.jsonl"), (EXPERT, expert_records or [], EXPERT_EPISODES)):
-        failed = [r for r in kept if "error" in r]
+    for whose, kept, file in (("", records, "episodes.jsonl"), (" of the expert", expert_records, EXPERT_EPISODES)):
+        failed = [r for r in kept or () if "error" in r]
         if failed:
             print(
-                f"tissue-retract robustness: error: {len(failed)} of {len(kept)} episodes of {who} failed; first: "
-                f"{failed[0]['error']} (the others are kept in {out / file})",
+                f"tissue-retract robustness: error: {len(failed)} of {len(kept or ())} episodes{whose} failed; "
+                f"first: {failed[0]['error']} (the others are kept in {out / file})",
                 file=sys.stderr,
             )
             status = 1
