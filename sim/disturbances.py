@@ -114,14 +114,20 @@ class DisturbanceWrapper(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str
         )
         return disturbed
 
+    def _choose_disturbances(self) -> None:
+        """Set this episode's disturbances (drawing from the episode's stream); these are fixed, so nothing."""
+
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Reset the env and draw this episode's disturbance directions from the seed."""
         obs, info = self.env.reset(seed=seed, options=options)
-        # A stream of its own, derived from the episode seed, so the env's own randomness is untouched.
-        self._rng = np.random.default_rng(None if seed is None else [seed, 0xD157])
+        # A stream of its own, derived from the episode seed, so the env's own randomness is untouched; without
+        # a seed the stream goes on (as a Gymnasium env's generator does), so what follows a seed repeats.
+        if seed is not None:
+            self._rng = np.random.default_rng([seed, 0xD157])
         self._step = 0
+        self._choose_disturbances()
         obs_size = int(np.asarray(obs["observation"]).size)
         action_size = int(np.prod(self.action_space.shape or (1,)))
         self._obs_directions = [_unit(self._rng, obs_size) for _ in self.observation_disturbances]

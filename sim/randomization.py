@@ -1,8 +1,9 @@
 """Domain randomization: named parameter ranges, sampled from the environment's seeded generator.
 
-Every parameter is drawn uniformly from its range at each reset; ``reset(options={name: value})``
-fixes any of them for that episode; ranges are configurable when the environment is made. Unknown
-names raise an error listing the valid ones.
+Every parameter is drawn uniformly from its range at each reset (or log-uniformly, where asked: a
+sweep's ``x`` range, as :mod:`sim.sweep.space` draws it); ``reset(options={name: value})`` fixes any of
+them for that episode; ranges are configurable when the environment is made. Unknown names raise an
+error listing the valid ones.
 
 Streams. The parameters are drawn in order from the episode's generator, so a new parameter drawn from
 it would shift every later draw. Parameters that only the camera sees (:data:`RENDER_PARAMETERS`) come
@@ -29,7 +30,7 @@ what happens when the robot's sensing is worse, or better, than the model the fi
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -121,13 +122,18 @@ class Randomizer:
 
     Args:
         ranges: Overrides of :data:`DEFAULT_RANGES` by name; ``(v, v)`` fixes a parameter for good.
+        log_uniform: Parameters drawn log-uniformly (a factor of 0.3 as likely as one of 3.3); their
+            ranges must be above 0. One draw each, as a uniform one, so no other draw moves.
 
     Raises:
         UnknownVariantError: A name that is not a parameter (the valid names are listed).
-        ConfigurationError: A range whose low end is above its high end, or not finite.
+        ConfigurationError: A range whose low end is above its high end, or not finite; a log-uniform
+            range that reaches 0, or an integer parameter drawn log-uniformly.
     """
 
-    def __init__(self, ranges: Mapping[str, tuple[float, float]] | None = None) -> None:
+    def __init__(
+        self, ranges: Mapping[str, tuple[float, float]] | None = None, log_uniform: Iterable[str] = ()
+    ) -> None:
         self.ranges = dict(DEFAULT_RANGES)
         for name, bounds in (ranges or {}).items():
             self.check_name(name)
@@ -137,6 +143,13 @@ class Randomizer:
             _check_limits(name, low)
             _check_limits(name, high)
             self.ranges[name] = (low, high)
+        self.log_uniform = frozenset(log_uniform)
+        for name in self.log_uniform:
+            self.check_name(name)
+            if name in INTEGER_PARAMETERS or not self.ranges[name][0] > 0.0:
+                raise ConfigurationError(
+                    f"{name} (log-uniform)", self.ranges[name], "a range above 0 of a parameter that is no integer"
+                )
 
     def check_name(self, name: str) -> None:
         """Raise if ``name`` is not a randomization parameter."""
@@ -183,6 +196,8 @@ class Randomizer:
                 source = render_rng if name in RENDER_PARAMETERS else rng
             if name in INTEGER_PARAMETERS:
                 drawn = float(source.integers(int(low), int(high) + 1))
+            elif name in self.log_uniform:
+                drawn = float(np.exp(source.uniform(np.log(low), np.log(high))))
             else:
                 drawn = float(source.uniform(low, high))
             value = float(fixed.get(name, drawn))

@@ -11,21 +11,24 @@ disturbances; running the trial with a policy is the sweep worker's job.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from typing import NamedTuple
 
 from psm_control.errors import ConfigurationError
 from sim.disturbances import Disturbance
 from sim.randomization import DEFAULT_RANGES, INTEGER_PARAMETERS
-from sim.sweep.space import ParameterRange
+from sim.sweep.space import ParameterRange, parse_ranges
 
 __all__ = [
     "ALIASES",
     "DISTURBANCE_PARAMETERS",
+    "TrainingRanges",
     "check_relative_ranges",
     "disturbances",
     "episode_options",
     "integer_parameters",
     "parameter_unit_labels",
     "parameter_units",
+    "parse_vary",
     "sweep_parameters",
     "sweep_ranges",
     "training_ranges",
@@ -113,19 +116,39 @@ def nominal(name: str) -> float:
 
 
 def check_relative_ranges(ranges: Iterable[ParameterRange]) -> None:
-    """Refuse ``x`` ranges on parameters without a non-zero nominal value (a multiple of 0 is always 0).
+    """Refuse ``x`` ranges on parameters without a non-zero nominal value (a multiple of 0 is always 0), and
+    negative disturbance magnitudes (a standard deviation or an offset's norm is at least 0).
 
     Raises:
-        ConfigurationError: Naming the parameter and asking for an absolute range.
+        ConfigurationError: Naming the parameter and asking for an absolute range (of magnitudes >= 0).
     """
     for r in ranges:
-        if not r.relative:
-            continue
         full = ALIASES.get(r.name, r.name)
-        if full not in DEFAULT_RANGES or nominal(full) == 0.0:
+        if r.relative and (full not in DEFAULT_RANGES or nominal(full) == 0.0):
             raise ConfigurationError(
                 f"vary.{r.name}", r.describe(), "an absolute LOW:HIGH range (its nominal value is 0)"
             )
+        if r.name in DISTURBANCE_PARAMETERS and r.low < 0.0:
+            raise ConfigurationError(f"vary.{r.name}", r.describe(), "a range of magnitudes >= 0")
+
+
+def parse_vary(text: str) -> tuple[ParameterRange, ...]:
+    """``--vary`` as ``robustness`` and ``train`` both take it: the names of :func:`sweep_parameters`, their
+    units, whole numbers for :func:`integer_parameters`, and the checks of :func:`check_relative_ranges`.
+
+    Raises:
+        UnknownVariantError: A name that is no sweep parameter (the valid ones are listed).
+        ConfigurationError: A malformed or impossible range, naming it and what is allowed.
+    """
+    ranges = parse_ranges(
+        text,
+        valid_names=sweep_parameters(),
+        units=parameter_units(),
+        integers=integer_parameters(),
+        unit_labels=parameter_unit_labels(),
+    )
+    check_relative_ranges(ranges)
+    return ranges
 
 
 def sweep_ranges(
@@ -151,20 +174,41 @@ def sweep_ranges(
     return declared
 
 
-def training_ranges(ranges: Iterable[tuple[str, float, float, bool]]) -> dict[str, tuple[float, float]]:
-    """The randomization ranges a training run draws from: each swept name's range, made absolute.
+class TrainingRanges(NamedTuple):
+    """What a training run draws each episode from ``--vary``'s ranges.
 
-    Raises:
-        ConfigurationError: A disturbance (a sweep's wrapper, not a randomization parameter).
+    Attributes:
+        randomization: The simulation's randomization ranges by full name, absolute
+            (:class:`sim.randomization.Randomizer` draws them at each reset).
+        log_uniform: The full names of those given as multiples of nominal (``x``), drawn log-uniformly
+            as a sweep draws them.
+        disturbances: The disturbances' ranges, as parsed (:class:`sim.drawn_disturbances.DrawnDisturbanceWrapper`
+            draws their magnitudes at each reset, as a sweep draws a trial's).
     """
+
+    randomization: dict[str, tuple[float, float]]
+    log_uniform: frozenset[str]
+    disturbances: tuple[ParameterRange, ...]
+
+
+def training_ranges(ranges: Iterable[ParameterRange]) -> TrainingRanges:
+    """What a training run draws from: each randomization parameter's range made absolute (log-uniform where
+    it was a multiple), and the disturbances' ranges as they are."""
     drawn: dict[str, tuple[float, float]] = {}
-    for name, low, high, relative in ranges:
-        if name in DISTURBANCE_PARAMETERS:
-            raise ConfigurationError(f"vary.{name}", name, "a randomization parameter (disturbances are sweeps' only)")
-        full = ALIASES.get(name, name)
-        scale = nominal(full) if relative else 1.0
-        drawn[full] = (low * scale, high * scale)
-    return drawn
+    log_uniform: set[str] = set()
+    disturbed: list[ParameterRange] = []
+    for r in ranges:
+        if r.name in DISTURBANCE_PARAMETERS:
+            disturbed.append(r)
+            continue
+        full = ALIASES.get(r.name, r.name)
+        scale = nominal(full) if r.relative else 1.0
+        drawn[full] = (r.low * scale, r.high * scale)
+        if r.relative:
+            log_uniform.add(full)
+        else:
+            log_uniform.discard(full)  # the last range of a parameter is the one drawn (stiffness, youngs_modulus)
+    return TrainingRanges(drawn, frozenset(log_uniform), tuple(disturbed))
 
 
 def episode_options(params: Mapping[str, float], relative: Mapping[str, bool]) -> dict[str, float]:

@@ -19,6 +19,7 @@ from sim.disturbances import DisturbanceWrapper
 from sim.envs import make
 from sim.evaluation import check_start_inside_workspace, run_episode
 from sim.robustness import disturbances, episode_options
+from sim.stiffness_fifths import STIFFNESS_KEY
 from sim.tissue import TissueParams
 from sim.tuning import integer_settings
 
@@ -139,6 +140,8 @@ def robustness_episode(
     outcome.pop("seed", None)
     outcome["interventions"] = {"total": int(result.interventions), **outcome.pop("intervention_kinds")}
     outcome["options"] = options
+    # The flap's stiffness as drawn, swept or not: the report's table by fifth of it (sim.stiffness_fifths).
+    outcome[STIFFNESS_KEY] = float(env.unwrapped.values[STIFFNESS_KEY])
     return outcome
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -135,9 +135,10 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._joint_offset: np.ndarray | None = None
         self._base_error: np.ndarray | None = None
 
-    def use_randomization(self, ranges: dict[str, tuple[float, float]]) -> None:
-        """Draw the next episodes from these ranges (over the configured ones), and bound the tissue by them."""
-        self.randomizer = Randomizer({**self.config.randomization, **ranges})
+    def use_randomization(self, ranges: dict[str, tuple[float, float]], log_uniform: Iterable[str] = ()) -> None:
+        """Draw the next episodes from these ranges (over the configured ones; ``log_uniform`` names those drawn
+        log-uniformly, see :class:`sim.randomization.Randomizer`), and bound the tissue by them."""
+        self.randomizer = Randomizer({**self.config.randomization, **ranges}, log_uniform)
         self.use_force_sensing(self.sensing.name)
 
     @property

@@ -15,9 +15,10 @@ from matplotlib.ticker import FormatStrFormatter, FuncFormatter
 
 from psm_control import __version__
 from sim.evaluation import FAILURE_CLASSES, describe_exceedances, force_limit_summary
+from sim.stiffness_fifths import StiffnessFifth, by_stiffness_fifth, expert_summary
 from sim.sweep.page import Page, percent, percent_interval, quantity
 from sim.sweep.space import ParameterRange
-from sim.sweep.stats import binned_success, wilson_interval
+from sim.sweep.stats import THIN_BIN_EPISODES, binned_success, wilson_interval
 
 __all__ = ["summarize", "write_report"]
 
@@ -156,10 +157,6 @@ def _bin_label(low: float, high: float, parameter: ParameterRange) -> str:
     return f"{quantity(low)} to {quantity(high)}{unit}"
 
 
-#: Fewer episodes than this in a bin: its success rate is flagged as thin (with 20 episodes at 50 % success the
-#: Wilson 95 % interval is already 30-70 %).
-THIN_BIN_EPISODES = 20
-
 #: What the report's terms mean, printed under its summary.
 DEFINITIONS = (
     ("success", "the task's goal reached at the episode's last step (the paper's criterion)"),
@@ -175,7 +172,38 @@ DEFINITIONS = (
         f"a bin of fewer than {THIN_BIN_EPISODES} episodes: its success rate is known to +-20 points or worse "
         "(read it with its 95 % CI)",
     ),
+    (
+        "stopped by the force limit",
+        "an unsuccessful episode that the safety filter's force limit held back (failure class force_limit_stall: "
+        "the pull held at the limit, no more serious event)",
+    ),
 )
+
+
+def _stiffness_section(page: Page, fifths: Sequence[StiffnessFifth], expert: bool) -> None:
+    """The table of success and force-limit stops by fifth of the drawn stiffness (the expert's beside)."""
+    page.heading("Where the force limit stops a retraction, by fifth of the drawn stiffness")
+    beside = ", the scripted expert's episodes of the same trials (seeds and draws) beside the policy's"
+    page.paragraph(
+        "The trials ordered by the Young's modulus their flap was drawn with, in five groups whose sizes differ by "
+        f"at most one{beside if expert else ''}."
+    )
+    header = ["Young's modulus", "trials", "success", "stopped by the force limit"]
+    if expert:
+        header += ["expert success", "expert stopped by the force limit"]
+    rows = []
+    for f in fifths:
+        data = f.to_dict()
+        row = [
+            f"{quantity(f.stiffness_low_kpa)} to {quantity(f.stiffness_high_kpa)} kPa",
+            f"{f.trials} (thin)" if f.thin else str(f.trials),
+            percent(data["success"]),
+            percent(data["force_limit_stall"]),
+        ]
+        if expert:
+            row += [percent(data["expert_success"]), percent(data["expert_force_limit_stall"])]
+        rows.append(row)
+    page.table(header, rows)
 
 
 def write_report(
@@ -188,6 +216,7 @@ def write_report(
     force_limit_n: float | None = None,
     limit_enforced: bool = True,
     command: str = "",
+    expert_records: Sequence[dict[str, Any]] | None = None,
 ) -> dict[str, Path]:
     """Write plots, ``report.md`` and a self-contained ``report.html`` into ``out_dir``.
 
@@ -200,6 +229,8 @@ def write_report(
         force_limit_n: The retraction-force limit the episodes ran under [N] (None: not known).
         limit_enforced: False when the safety filter was off (the limit is shown, not claimed).
         command: The command line that ran the sweep.
+        expert_records: The scripted expert's records of the same trials, shown beside the policy's
+            (``robustness --beside-expert``); None: no expert pass.
 
     Returns:
         The written files by role (``report_html``, ``report_md``, the PNGs).
@@ -215,6 +246,14 @@ def write_report(
         ("episodes", f"{summary['episodes']} ({summary['errors']} errors)"),
         ("success", f"{percent(summary['success_rate'])} (95 % CI {percent_interval(low, high)})"),
     ]
+    if expert_records is not None:
+        expert = expert_summary(expert_records)
+        rows.append(
+            (
+                "scripted expert, same trials",
+                f"{percent(expert['expert_success'])} (95 % CI {percent_interval(*expert['expert_ci95'])})",
+            )
+        )
     alert = []
     if force_limit_n is not None and worst is not None:
         ratio = worst / force_limit_n
@@ -247,6 +286,9 @@ def write_report(
         page.command(command)
     page.heading("Terms")
     page.table(["term", "meaning"], [list(row) for row in DEFINITIONS])
+    fifths = by_stiffness_fifth(records, expert_records)
+    if fifths:
+        _stiffness_section(page, fifths, expert_records is not None)
     for parameter in ranges:
         stats = [
             b

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import csv
+import shlex
 import subprocess
 import sys
 import warnings
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import pytest
 
 from policies.algos import Dims, make_agent
@@ -286,3 +289,83 @@ def _toy_dims(env: gym.Env) -> tuple[int, int, int]:  # type: ignore[type-arg]
         int(spaces["desired_goal"].shape[0]),  # type: ignore[index]
         int(env.action_space.shape[0]),  # type: ignore[index]
     )
+
+
+#: The issue's robustness sweep (docs/robustness.md), with disturbances of what the policy sees and commands.
+SWEEP_VARY = (
+    "stiffness=0.3:3x,size=0.8:1.2x,obs_noise=0:0.002,latency=0:3,friction=0.7:1.3x,"
+    "obs_white_m=0:0.001,action_impulse=0:0.3"
+)
+
+
+def test_train_takes_the_sweeps_vary_and_records_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The recipe (collecting in a worker) trains over the sweep's full --vary; its checkpoints keep the string."""
+    args = ["train", "--task", "lift", "--demos", "2", "--episodes", "2", "--eval-every", "2", "--eval-episodes", "1"]
+    args += ["--vary", SWEEP_VARY, "--out", str(tmp_path), "--no-progress", "--no-tensorboard"]
+    for item in TINY:
+        args += ["--set", item]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        assert main(args) == 0
+    assert "collecting in a worker" in capsys.readouterr().out
+    for name in ("policy.safetensors", "resume.safetensors"):
+        meta = load_checkpoint(tmp_path / name).meta
+        command = shlex.split(meta["command"])
+        assert command[command.index("--vary") + 1] == SWEEP_VARY
+        assert meta["observation"] == f"task, randomized over {SWEEP_VARY}"
+
+
+@pytest.mark.parametrize(
+    "vary",
+    [
+        "stifness=1:2",
+        "latency=0.5:0.7",
+        "joint_offset=0.5:2x",
+        "obs_white_m=-0.001:0.001",
+        "stiffness=3:1x",
+        "youngs_modulus=2:30mm",
+    ],
+)
+def test_train_and_robustness_refuse_a_bad_vary_alike(
+    vary: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One parser: train and robustness refuse the same --vary with the same message, before writing anything."""
+    train_args = ["train", "--task", "lift", "--vary", vary, "--out", str(tmp_path / "train"), "--no-progress"]
+    assert main(train_args) == 1
+    trained = capsys.readouterr().err
+    sweep_args = ["robustness", "--policy", "scripted", "--task", "lift", "--vary", vary]
+    assert main([*sweep_args, "--out", str(tmp_path / "sweep"), "--no-progress"]) == 1
+    swept = capsys.readouterr().err
+    assert trained.startswith("tissue-retract train: error: vary") and swept.startswith("tissue-retract robustness:")
+    assert trained.partition(": error: ")[2] == swept.partition(": error: ")[2]
+    assert not (tmp_path / "train").exists() and not (tmp_path / "sweep").exists()
+
+
+#: Where the observation vector holds the site (tip 0:3, orientation 3:7, jaw 7), the lift task's achieved goal.
+_SITE = slice(8, 11)
+
+
+@pytest.mark.parametrize("name", ["obs_noise", "obs_white_m"])
+def test_observation_noise_reaches_training_and_demonstrations(name: str) -> None:
+    """The expert's demonstration on the training env: with NAME=0 the observed site is the true one at every
+    step; with NAME>0 it is not, in the same episode (the same seed: the same actions and true sites)."""
+    from policies.demos import collect_demos, expert_for
+    from tissue_retract.cli import build_parser
+    from tissue_retract.cli.train import task_wrapper
+
+    def demonstration(magnitude: str) -> Any:
+        vary = f"obs_noise=0,{name}={magnitude}" if name != "obs_noise" else f"obs_noise={magnitude}"
+        wrapper = task_wrapper(build_parser(["train"]).parse_args(["train", "--task", "lift", "--vary", vary]))
+        assert wrapper is not None
+        env = wrapper(gym.make(ensure_registered("lift")))
+        try:
+            (episode,) = collect_demos(env, expert_for(ensure_registered("lift")), 1, seed=11)
+        finally:
+            env.close()
+        return episode
+
+    zero, noisy = demonstration("0"), demonstration("0.001:0.002")
+    np.testing.assert_array_equal(zero.obs[:, _SITE], zero.achieved_goal)
+    np.testing.assert_array_equal(noisy.achieved_goal, zero.achieved_goal)
+    np.testing.assert_array_equal(noisy.action, zero.action)
+    assert np.all(np.abs(noisy.obs[:, _SITE] - noisy.achieved_goal).max(axis=1) > 0)

@@ -5,7 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from psm_control.errors import ConfigurationError
 from sim.randomization import DEFAULT_RANGES, Randomizer
+from sim.robustness import parse_vary, training_ranges
+from sim.sweep import make_trials
 from tests.sim.conftest import make_env
 
 
@@ -16,6 +19,34 @@ def test_same_seed_same_parameters() -> None:
     b = randomizer.sample(np.random.default_rng(4), {"tissue_density_kg_m3": 1050.0})
     assert a == b and a["tissue_density_kg_m3"] == 1050.0
     assert set(a) == set(DEFAULT_RANGES)
+
+
+def test_training_draws_a_multiple_as_a_sweep_does() -> None:
+    """stiffness=0.3:3x: training's modulus lies below nominal as often as the sweep's (log-uniform), and
+    drawing it so moves no other parameter's draw."""
+    ranges = training_ranges(parse_vary("stiffness=0.3:3x,size=0.07:0.09"))
+    assert ranges.log_uniform == {"tissue_youngs_modulus_kpa"} and ranges.disturbances == ()
+    logged, flat = Randomizer(ranges.randomization, ranges.log_uniform), Randomizer(ranges.randomization)
+    trained, plain = [], []
+    for seed in range(2000):
+        a, b = logged.sample(np.random.default_rng(seed)), flat.sample(np.random.default_rng(seed))
+        assert {k: v for k, v in a.items() if k != "tissue_youngs_modulus_kpa"} == {
+            k: v for k, v in b.items() if k != "tissue_youngs_modulus_kpa"
+        }
+        trained.append(a["tissue_youngs_modulus_kpa"] / 10.0)
+        plain.append(b["tissue_youngs_modulus_kpa"] / 10.0)
+    swept = [t.params["stiffness"] for t in make_trials(parse_vary("stiffness=0.3:3x"), 2000, seed=0)]
+    assert min(trained) >= 0.3 and max(trained) <= 3.0
+    assert np.mean(np.array(trained) < 1.0) == pytest.approx(np.mean(np.array(swept) < 1.0), abs=0.04)
+    assert np.mean(np.array(plain) < 1.0) < 0.35  # uniform in kPa: 7 of 27 kPa lie below 10
+
+
+def test_a_log_uniform_range_must_lie_above_zero() -> None:
+    """Log-uniform draws of a range reaching 0, or of a whole-number parameter, are refused by name."""
+    with pytest.raises(ConfigurationError, match="tissue_damping"):
+        Randomizer({"tissue_damping": (0.0, 0.1)}, log_uniform={"tissue_damping"})
+    with pytest.raises(ConfigurationError, match="action_latency_steps"):
+        Randomizer({"action_latency_steps": (1.0, 3.0)}, log_uniform={"action_latency_steps"})
 
 
 @pytest.mark.slow

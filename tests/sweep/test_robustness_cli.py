@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import subprocess
@@ -126,3 +127,46 @@ def test_the_report_reads_as_a_reviewer_needs(tmp_path: Path) -> None:
     assert " mm | 1 (thin) |" in report or " mm | 2 (thin) |" in report, report
     assert "e-05" not in report and "e-04" not in report
     assert re.search(r"\*\*interventions\*\*: (0$|\d+ \([a-z_]+ \d+)", report, re.MULTILINE), report  # by kind
+
+
+def _episodes(path: Path) -> list[dict[str, object]]:
+    """A sweep's records by trial index, without what depends on the process that ran them."""
+    records = [json.loads(line) for line in path.read_text().splitlines()]
+    return sorted(
+        ({k: v for k, v in r.items() if k not in ("worker_pid", "worker_rss_mb")} for r in records),
+        key=lambda r: int(r["index"]),  # type: ignore[call-overload]
+    )
+
+
+def test_beside_expert_shows_the_expert_on_the_same_trials_by_fifth_of_stiffness(tmp_path: Path) -> None:
+    """--beside-expert: the fifths partition the trials, and the expert's episodes, overall success and Wilson
+    interval are those of a --policy scripted sweep on the same seeds (where --beside-expert does nothing)."""
+    vary = ("--vary", "stiffness=0.3:3x,obs_white_m=0:0.001", "--jobs", "1")
+    sweep = ("robustness", "--task", "lift", "--trials", "5", "--no-progress", *vary, "--beside-expert")
+    beside = run_cli(*sweep, "--policy", "pretrained", "--out", str(tmp_path / "beside"))
+    assert beside.returncode == 0, beside.stderr
+    assert "scripted expert, same trials" in beside.stdout
+    alone = run_cli(*sweep, "--policy", "scripted", "--out", str(tmp_path / "scripted"))
+    assert alone.returncode == 0, alone.stderr
+    assert "--beside-expert: the policy is the scripted expert already; no second pass" in alone.stdout
+    assert not (tmp_path / "scripted" / "expert_episodes.jsonl").exists()
+    expert = _episodes(tmp_path / "beside" / "expert_episodes.jsonl")
+    assert expert == _episodes(tmp_path / "scripted" / "episodes.jsonl")
+    summary = json.loads((tmp_path / "beside" / "summary.json").read_text())
+    scripted = json.loads((tmp_path / "scripted" / "summary.json").read_text())
+    assert summary["beside_expert"] is True and scripted["beside_expert"] is False
+    assert (summary["expert_success"], summary["expert_ci95"]) == (scripted["success_rate"], scripted["ci95"])
+    fifths = summary["by_stiffness_fifth"]
+    assert [f["trials"] for f in fifths] == [1] * 5 and all(f["thin"] for f in fifths)
+    assert sum(f["expert_trials"] for f in fifths) == 5
+    assert [f["expert_success"] for f in fifths] == [f["success"] for f in scripted["by_stiffness_fifth"]]
+    assert all(a["stiffness_high_kpa"] <= b["stiffness_low_kpa"] for a, b in itertools.pairwise(fifths))
+    assert {f["stiffness_low_kpa"] for f in fifths} == {
+        r["options"]["tissue_youngs_modulus_kpa"]  # type: ignore[index]
+        for r in _episodes(tmp_path / "beside" / "episodes.jsonl")
+    }
+    report = (tmp_path / "beside" / "report.md").read_text()
+    assert "## Where the force limit stops a retraction, by fifth of the drawn stiffness" in report
+    header = "| Young's modulus | trials | success | stopped by the force limit | expert success |"
+    assert header in report and " kPa | 1 (thin) | " in report, report
+    assert "expert success" not in (tmp_path / "scripted" / "report.md").read_text()

@@ -4,6 +4,11 @@ Samples the ``--vary`` ranges (seeded, random or grid), runs every episode throu
 chain on a local process pool (or Ray), and writes to ``--out``: ``episodes.jsonl`` (one line per
 episode, written as it finishes, so an interrupted sweep resumes), ``summary.json``, PNG plots and
 ``report.html`` / ``report.md``.
+
+The report and ``summary.json`` (``by_stiffness_fifth``) show where the force limit stops a retraction:
+success and the share stopped by the force limit for each fifth of the trials by drawn stiffness
+(:mod:`sim.stiffness_fifths`). ``--beside-expert`` also runs the scripted expert on the same trials
+(seeds and draws), into ``expert_episodes.jsonl``, and shows its numbers beside the policy's.
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from rich.console import Console
 from rich.table import Table
@@ -23,17 +29,11 @@ from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig, load_safety_config
 from sim.envs import gym_id
 from sim.evaluation import describe_exceedances, describe_stalls
-from sim.robustness import (
-    check_relative_ranges,
-    integer_parameters,
-    parameter_unit_labels,
-    parameter_units,
-    sweep_parameters,
-    sweep_ranges,
-)
+from sim.robustness import parse_vary, sweep_ranges
+from sim.stiffness_fifths import by_stiffness_fifth, expert_summary
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success
-from sim.sweep import EpisodeStore, cap_jobs, file_digest, make_trials, parse_ranges, prepare_output, run_trials
+from sim.sweep import EpisodeStore, Trial, cap_jobs, file_digest, make_trials, prepare_output, run_trials
 from sim.sweep.report import summarize, write_report
 from tissue_retract.cli._camera import (
     add_perception_argument,
@@ -46,8 +46,12 @@ from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folde
 from tissue_retract.cli._sensing import add_force_sensing_argument, announce
 from tissue_retract.workers import ROBUSTNESS_WORKER, check_sweep_policy
 
+#: The scripted expert's episodes of the same trials (``--beside-expert``).
+EXPERT_EPISODES = "expert_episodes.jsonl"
 #: Files a robustness sweep writes into ``--out`` (besides its plots).
-OUTPUTS = ("episodes.jsonl", "sweep.json", "summary.json", "report.html", "report.md")
+OUTPUTS = ("episodes.jsonl", EXPERT_EPISODES, "sweep.json", "summary.json", "report.html", "report.md")
+#: The policy a sweep runs beside the user's with ``--beside-expert``.
+EXPERT = "scripted"
 
 __all__ = ["add_arguments", "run"]
 
@@ -96,6 +100,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--mode", choices=("random", "grid"), default="random", help="sampling (default random)")
     parser.add_argument("--no-safety", action="store_true", help="ablation: run without the safety filter")
+    parser.add_argument(
+        "--beside-expert",
+        action="store_true",
+        help=f"also run the scripted expert on the same trials (seeds and draws), into {EXPERT_EPISODES}, and "
+        "report its success and force-limit stops beside the policy's (nothing more with --policy scripted)",
+    )
     add_perception_argument(parser)
     add_texture_argument(parser)
 
@@ -146,14 +156,7 @@ def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write its files, print its summary."""
     task_id = gym_id(args.task)
-    ranges = parse_ranges(
-        args.vary,
-        valid_names=sweep_parameters(),
-        units=parameter_units(),
-        integers=integer_parameters(),
-        unit_labels=parameter_unit_labels(),
-    )
-    check_relative_ranges(ranges)
+    ranges = parse_vary(args.vary)
     count = args.trials ** len(ranges) if args.mode == "grid" else args.trials
     if count > MAX_TRIALS:
         raise ConfigurationError(
@@ -203,6 +206,8 @@ def run(args: argparse.Namespace) -> int:
         perception=args.perception,
         texture=texture,
     )
+    if args.fresh:
+        (out / EXPERT_EPISODES).unlink(missing_ok=True)
     prepare_output(out, identity, fresh=args.fresh)
     store = EpisodeStore(out / "episodes.jsonl")
     already = len(store.done() & {t.index for t in trials})
@@ -217,6 +222,7 @@ def run(args: argparse.Namespace) -> int:
         show_progress=not args.no_progress,
     )
     elapsed = time.perf_counter() - started
+    expert_records = _beside_expert(args, trials, kwargs, out, jobs)
     summary = summarize(records)
     ran = len(records) - already
     summary.update(
@@ -234,6 +240,9 @@ def run(args: argparse.Namespace) -> int:
             "safety": not args.no_safety,
             "force_sensing": args.force_sensing,
             "warnings": [warning] if warning else [],
+            "beside_expert": expert_records is not None,
+            "by_stiffness_fifth": [f.to_dict() for f in by_stiffness_fifth(records, expert_records)],
+            **(expert_summary(expert_records) if expert_records is not None else {}),
         }
     )
     write_strict_json(out / "summary.json", summary, sort_keys=True)
@@ -260,6 +269,7 @@ def run(args: argparse.Namespace) -> int:
         force_limit_n=config.effective_force_limit_n,
         limit_enforced=not args.no_safety,
         command=args.command_line,
+        expert_records=expert_records,
     )
     table = Table(title=f"robustness: {args.policy} on {task_id}")
     table.add_column("metric")
@@ -267,6 +277,11 @@ def run(args: argparse.Namespace) -> int:
     finished = [r for r in records if "error" not in r]
     table.add_row("episodes (errors)", f"{summary['episodes']} ({summary['errors']})")
     table.add_row("success", describe_success(sum(1 for r in finished if r.get("success")), len(finished)))
+    if expert_records is not None:
+        beside = [r for r in expert_records if "error" not in r]
+        table.add_row(
+            "scripted expert, same trials", describe_success(sum(1 for r in beside if r.get("success")), len(beside))
+        )
     table.add_row(
         "peak force max / p95 [N]",
         f"{summary['peak_force_n']['max'] or 0:.3f} / {summary['peak_force_n']['p95'] or 0:.3f}",
@@ -279,12 +294,35 @@ def run(args: argparse.Namespace) -> int:
         table.add_row("episodes/s (this run)", f"{summary['episodes_per_s']:.2f}")
     Console(width=110).print(table)
     print(f"report: {out / 'report.html'}")
-    failed = [r for r in records if "error" in r]
-    if failed:
-        print(
-            f"tissue-retract robustness: error: {len(failed)} of {len(records)} episodes failed; first: "
-            f"{failed[0]['error']} (the others are kept in {out / 'episodes.jsonl'})",
-            file=sys.stderr,
-        )
-        return 1
-    return 0
+    status = 0
+    for whose, kept, file in (("", records, "episodes.jsonl"), (" of the expert", expert_records, EXPERT_EPISODES)):
+        failed = [r for r in kept or () if "error" in r]
+        if failed:
+            print(
+                f"tissue-retract robustness: error: {len(failed)} of {len(kept or ())} episodes{whose} failed; "
+                f"first: {failed[0]['error']} (the others are kept in {out / file})",
+                file=sys.stderr,
+            )
+            status = 1
+    return status
+
+
+def _beside_expert(
+    args: argparse.Namespace, trials: list[Trial], kwargs: dict[str, Any], out: Path, jobs: int
+) -> list[dict[str, Any]] | None:
+    """With ``--beside-expert``, the scripted expert's episodes of the same trials (None without it, or when the
+    policy is the expert already)."""
+    if not args.beside_expert:
+        return None
+    if args.policy == EXPERT:
+        print(f"--beside-expert: the policy is the {EXPERT} expert already; no second pass")
+        return None
+    return run_trials(
+        trials,
+        ROBUSTNESS_WORKER,
+        store=EpisodeStore(out / EXPERT_EPISODES),
+        backend=args.backend,
+        jobs=jobs,
+        worker_kwargs={**kwargs, "policy": EXPERT, "allow_other_task": False},
+        show_progress=not args.no_progress,
+    )

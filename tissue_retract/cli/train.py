@@ -13,6 +13,12 @@ defaults are the seed paper's; ``--set FIELD=VALUE`` overrides any field of
 ``deploy --site``): a site registered up to ``--registration-error-mm`` from the true one, a jaw-sensed
 grasp and the estimated site, rewarded by the simulation's true distance to the goal (see
 :mod:`hardware_if.registered_env`). Demonstrations and the evaluations in ``eval.csv`` see the same.
+
+``--vary`` takes what ``robustness --vary`` takes, parsed by the same function
+(:func:`sim.robustness.parse_vary`): every episode, the expert's demonstrations and the evaluations
+included, draws its tissue, observation noise and latency from the ranges (:mod:`sim.randomization`), and
+the magnitudes of the observation and action disturbances as a sweep's trial has them
+(:mod:`sim.drawn_disturbances`), all from the episode's seed.
 """
 
 from __future__ import annotations
@@ -38,14 +44,14 @@ from policies.config import TrainConfig
 from policies.recipe import DEFAULT_RECIPE
 from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
 from psm_control.errors import ConfigurationError
-from sim.robustness import check_relative_ranges, parameter_units, sweep_parameters, training_ranges
-from sim.sweep import parse_ranges
+from sim.drawn_disturbances import DrawnDisturbanceWrapper
+from sim.robustness import TrainingRanges, parse_vary, training_ranges
 from tissue_retract.cli._blind import add_blind_arguments
 from tissue_retract.cli._camera import add_perception_argument, load_perception
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, float_in, int_in
 from tissue_retract.cli._sensing import add_force_sensing_argument
 
-__all__ = ["add_arguments", "parse_overrides", "run"]
+__all__ = ["add_arguments", "parse_overrides", "run", "task_wrapper"]
 
 ALGOS = ("ddpg", "sqil", "ddpgbc", "col", "dex")
 
@@ -121,8 +127,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--vary",
         default=None,
-        help="train over these randomization ranges, named as robustness's --vary (NAME=LOW:HIGH, LOW:HIGHx "
-        "times nominal), e.g. stiffness=0.3:3x,sensing_scale=0:1; disturbances are for sweeps only",
+        help="train over these ranges, as robustness's --vary takes them (NAME=LOW:HIGH, NAME=LOW:HIGHx times "
+        "nominal, NAME=VALUE; the same names): each episode draws its tissue, noise, latency and "
+        "disturbances from them, the demonstrations' and evaluations' too, e.g. "
+        "stiffness=0.3:3x,obs_noise=0:0.002,latency=0:3",
     )
 
 
@@ -162,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
     args.task = ensure_registered(args.task)
     run_name = args.algo if recipe is None else recipe.name
     out = args.out if args.out is not None else Path("runs") / args.task / f"{run_name}-s{args.seed}"
+    wrapper = task_wrapper(args)  # a bad --vary is refused before anything is written
     check_out_folder(out, (POLICY_FILE, RESUME_FILE, "eval.csv"), (args.demos_file,))
     command = shlex.join(["tissue-retract", *sys.argv[1:]]) if sys.argv[1:2] == ["train"] else _rebuild(args)
     spec = RunSpec(
@@ -177,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
         resume=not args.fresh,
         progress=not args.no_progress,
         tensorboard=not args.no_tensorboard,
-        env_wrapper=_task_wrapper(args),
+        env_wrapper=wrapper,
         observation=_observation(args),
         budget_s=args.budget_s,
         started_s=_command_started_s() if sys.argv[1:2] == ["train"] else None,  # else: called in-process
@@ -232,9 +241,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _task_wrapper(args: argparse.Namespace) -> Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None:
-    """What the policy trains on: the force as ``--force-sensing`` senses it over ``--vary``'s ranges, and
-    the task as a robot without perception (``--blind``) or with the endoscope (``--perception``) sees it."""
+def task_wrapper(args: argparse.Namespace) -> Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None:
+    """What the policy trains on (``train``'s parsed arguments): the force as ``--force-sensing`` senses it
+    over ``--vary``'s ranges, the task as a robot without perception (``--blind``) or with the endoscope
+    (``--perception``) sees it, and ``--vary``'s disturbances on what it sees and commands."""
     if args.blind and args.perception is not None:
         raise ConfigurationError("--perception", args.perception, "either --blind or --perception, not both")
     seen: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
@@ -244,8 +254,8 @@ def _task_wrapper(args: argparse.Namespace) -> Callable[[gym.Env[Any, Any]], gym
     elif args.blind:
         registration_error_m = args.registration_error_mm / 1000.0
         seen = functools.partial(RegisteredTask, registration_error_m=registration_error_m, for_training=True)
-    ranges = _ranges(args.vary)
-    if args.force_sensing == "ideal" and not ranges:
+    ranges = training_ranges(parse_vary(args.vary)) if args.vary else TrainingRanges({}, frozenset(), ())
+    if args.force_sensing == "ideal" and not ranges.randomization and not ranges.disturbances:
         return seen
     return functools.partial(_sensed_task, args.force_sensing, ranges, seen)
 
@@ -260,26 +270,19 @@ def _observation(args: argparse.Namespace) -> str:
     return seen + sensed + (f", randomized over {args.vary}" if args.vary else "")
 
 
-def _ranges(vary: str | None) -> dict[str, tuple[float, float]]:
-    """``--vary``'s ranges, as robustness takes them, made the training's randomization ranges."""
-    if not vary:
-        return {}
-    parsed = parse_ranges(vary, valid_names=sweep_parameters(), units=parameter_units())
-    check_relative_ranges(parsed)
-    return training_ranges((r.name, r.low, r.high, r.relative) for r in parsed)
-
-
 def _sensed_task(
     sensing: str,
-    ranges: dict[str, tuple[float, float]],
+    ranges: TrainingRanges,
     seen: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None,
     env: gym.Env[Any, Any],
 ) -> gym.Env[Any, Any]:
-    """The task with its ranges and force sensing set, then as ``seen`` observes it (it pickles)."""
-    if ranges:
-        env.unwrapped.use_randomization(ranges)  # type: ignore[attr-defined]
+    """The task with its ranges and force sensing set, as ``seen`` observes it, disturbed as a sweep's trial
+    is (outermost, as the sweep wraps it; it pickles)."""
+    if ranges.randomization:
+        env.unwrapped.use_randomization(ranges.randomization, ranges.log_uniform)  # type: ignore[attr-defined]
     env.unwrapped.use_force_sensing(sensing)  # type: ignore[attr-defined]
-    return env if seen is None else seen(env)
+    observed = env if seen is None else seen(env)
+    return DrawnDisturbanceWrapper(observed, ranges.disturbances) if ranges.disturbances else observed
 
 
 def _rebuild(args: argparse.Namespace) -> str:
