@@ -28,7 +28,10 @@ from dataclasses import dataclass
 
 from policies.config import TrainConfig
 
-__all__ = ["DEFAULT_RECIPE", "Recipe"]
+__all__ = ["DEFAULT_RECIPE", "ROBUST_RECIPE", "SWEEP_VARY", "Recipe"]
+
+#: The robustness sweep's ranges (``docs/robustness.md``): what ``train --robust`` trains and judges on.
+SWEEP_VARY = "stiffness=0.3:3x,size=0.8:1.2x,obs_noise=0:0.002,latency=0:3,friction=0.7:1.3x"
 
 
 @dataclass(frozen=True)
@@ -44,6 +47,11 @@ class Recipe:
         eval_episodes: Held-out episodes per evaluation.
         stop_at_success: Stop at the first evaluation with at least this success rate.
         overlap: Collect in a worker process while learning.
+        vary: Train over these ranges (``train --vary``'s string) unless ``--vary`` says otherwise: every
+            episode, demonstration and evaluation draws its conditions from them. None: the nominal task.
+        budget_s: The whole command's wall-clock budget [s] unless ``--budget-s`` says otherwise; None: none.
+        demo_action_noise: Noise on the motion the expert's demonstrations execute, a fraction of the largest
+            action (:func:`policies.demos.collect_demos`); 0: as the expert acts.
     """
 
     name: str
@@ -54,6 +62,9 @@ class Recipe:
     eval_episodes: int
     stop_at_success: float
     overlap: bool = True
+    vary: str | None = None
+    budget_s: float | None = None
+    demo_action_noise: float = 0.0
 
 
 #: ``tissue-retract train`` without ``--algo``.
@@ -65,4 +76,19 @@ DEFAULT_RECIPE = Recipe(
     eval_every=50,
     eval_episodes=100,
     stop_at_success=0.97,
+)
+
+
+#: ``tissue-retract train --robust``: the default recipe over the robustness sweep's ranges, within 10 minutes.
+ROBUST_RECIPE = Recipe(
+    name="robust",
+    config=TrainConfig(algo="col", bc_pretrain_steps=10_000, bc_weight=50.0, random_steps=0, updates_per_episode=50),
+    demos=600,
+    episodes=2_000,
+    eval_every=50,
+    eval_episodes=100,
+    stop_at_success=0.97,
+    vary=SWEEP_VARY,
+    budget_s=570.0,
+    demo_action_noise=0.3,
 )

@@ -18,7 +18,7 @@ from policies.algos import Dims, make_agent
 from policies.budget import FINISH_RESERVE_S, Budget
 from policies.checkpoint import load_checkpoint, load_policy
 from policies.config import ALGORITHMS, TrainConfig
-from policies.recipe import DEFAULT_RECIPE
+from policies.recipe import DEFAULT_RECIPE, ROBUST_RECIPE
 from policies.toy_env import TOY_TASK_ID
 from policies.trainer import RunSpec, ensure_registered, evaluate, train
 from psm_control.errors import ConfigurationError
@@ -313,6 +313,33 @@ def test_train_takes_the_sweeps_vary_and_records_it(tmp_path: Path, capsys: pyte
         command = shlex.split(meta["command"])
         assert command[command.index("--vary") + 1] == SWEEP_VARY
         assert meta["observation"] == f"task, randomized over {SWEEP_VARY}"
+
+
+def test_train_robust_trains_over_the_sweeps_ranges_by_default(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--robust is the robust recipe: the sweep's --vary and noisy demonstrations unless told otherwise."""
+    args = ["train", "--task", "lift", "--robust", "--demos", "2", "--episodes", "1", "--eval-every", "1"]
+    args += ["--eval-episodes", "1", "--budget-s", "120", "--out", str(tmp_path), "--no-progress", "--no-tensorboard"]
+    for item in TINY:
+        args += ["--set", item]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        assert main(args) == 0
+    out = capsys.readouterr().out
+    assert f"recipe {ROBUST_RECIPE.name}: col, 2 demonstrations" in out
+    assert f"every episode drawn over {ROBUST_RECIPE.vary}" in out and "budget 120 s" in out
+    meta = load_checkpoint(tmp_path / "policy.safetensors").meta
+    assert meta["observation"] == f"task, randomized over {ROBUST_RECIPE.vary}"
+    assert "--robust" in shlex.split(meta["command"])
+
+
+def test_train_robust_and_algo_are_refused_together(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--robust is a recipe: with one of the paper's algorithms it is refused before anything is written."""
+    args = ["train", "--task", "lift", "--robust", "--algo", "ddpg", "--out", str(tmp_path / "run"), "--no-progress"]
+    assert main(args) == 1
+    assert "either --robust (a recipe) or --algo" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
 
 
 @pytest.mark.parametrize(

@@ -41,7 +41,7 @@ import gymnasium as gym
 from hardware_if.perceived_env import camera_task
 from hardware_if.registered_env import RegisteredTask
 from policies.config import TrainConfig
-from policies.recipe import DEFAULT_RECIPE
+from policies.recipe import DEFAULT_RECIPE, ROBUST_RECIPE, Recipe
 from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
 from psm_control.errors import ConfigurationError
 from sim.drawn_disturbances import DrawnDisturbanceWrapper
@@ -98,6 +98,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             help=f"{what} (default: {getattr(DEFAULT_RECIPE, name)} for the recipe, "
             f"{getattr(_PAPER_RUN, name)} with --algo{note})",
         )
+    parser.add_argument(
+        "--robust",
+        action="store_true",
+        help=f"the {ROBUST_RECIPE.name!r} recipe: trained and evaluated over the robustness sweep's ranges "
+        f"(default --vary {ROBUST_RECIPE.vary}), from {ROBUST_RECIPE.demos} demonstrations drawn over them, "
+        f"within a {ROBUST_RECIPE.budget_s:g} s budget (default --budget-s), keeping the policy best on "
+        "randomized held-out episodes; not with --algo",
+    )
+    parser.add_argument(
+        "--demo-action-noise",
+        type=float_in(0.0, 1.0),
+        default=None,
+        help="the expert's demonstrations execute their motion with Gaussian noise of this std (a fraction of "
+        "the largest action) and record the expert's own action, as DART does (default: "
+        f"{ROBUST_RECIPE.demo_action_noise:g} with --robust, else 0)",
+    )
     parser.add_argument("--demos-file", type=Path, default=None, help="read demonstrations from this .npz")
     parser.add_argument("--seed", type=int_in(0, MAX_SEED), default=1, help=f"seed 0-{MAX_SEED} (default: 1)")
     parser.add_argument(
@@ -158,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigurationError(
                 "--set", name, "a TrainConfig field other than algo: " + ", ".join(sorted(known - {"algo"}))
             )
-    recipe = DEFAULT_RECIPE if args.algo is None else None
+    recipe = _recipe(args)
     if recipe is not None:
         config = dataclasses.replace(recipe.config, **overrides)  # type: ignore[arg-type]
     else:
@@ -167,6 +183,12 @@ def run(args: argparse.Namespace) -> int:
     for name in ("demos", "episodes", "eval_every", "eval_episodes"):
         if getattr(args, name) is None:
             setattr(args, name, getattr(defaults, name))
+    if recipe is not None and args.vary is None:
+        args.vary = recipe.vary
+    if recipe is not None and args.budget_s is None:
+        args.budget_s = recipe.budget_s
+    if args.demo_action_noise is None:
+        args.demo_action_noise = recipe.demo_action_noise if recipe is not None else 0.0
     args.task = ensure_registered(args.task)
     run_name = args.algo if recipe is None else recipe.name
     out = args.out if args.out is not None else Path("runs") / args.task / f"{run_name}-s{args.seed}"
@@ -192,13 +214,14 @@ def run(args: argparse.Namespace) -> int:
         started_s=_command_started_s() if sys.argv[1:2] == ["train"] else None,  # else: called in-process
         overlap=recipe is not None and recipe.overlap,
         stop_at_success=None if recipe is None else recipe.stop_at_success,
+        demo_action_noise=args.demo_action_noise,
     )
     if recipe is not None:
         print(
             f"recipe {recipe.name}: {config.algo}, {args.demos} demonstrations, "
             f"{'collecting in a worker process, ' if spec.overlap else ''}"
             f"stopping at {100 * recipe.stop_at_success:g} % on {args.eval_episodes} held-out episodes "
-            f"(evaluated every {args.eval_every})"
+            f"(evaluated every {args.eval_every})" + (f"; every episode drawn over {args.vary}" if args.vary else "")
         )
     result = train(spec, config)
     if result.resumed_from:
@@ -239,6 +262,15 @@ def run(args: argparse.Namespace) -> int:
     if args.budget_s is not None and sys.argv[1:2] == ["train"]:
         _end_process_now(0)
     return 0
+
+
+def _recipe(args: argparse.Namespace) -> Recipe | None:
+    """The recipe the arguments ask for (None: one of the paper's algorithms, ``--algo``)."""
+    if getattr(args, "robust", False):
+        if args.algo is not None:
+            raise ConfigurationError("--robust", args.algo, "either --robust (a recipe) or --algo, not both")
+        return ROBUST_RECIPE
+    return DEFAULT_RECIPE if args.algo is None else None
 
 
 def task_wrapper(args: argparse.Namespace) -> Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None:
@@ -289,6 +321,8 @@ def _rebuild(args: argparse.Namespace) -> str:
     parts = ["tissue-retract", "train", "--task", args.task]
     if args.algo is not None:
         parts += ["--algo", args.algo]
+    if getattr(args, "robust", False):
+        parts += ["--robust"]
     parts += ["--demos", str(args.demos)]
     parts += ["--seed", str(args.seed), "--episodes", str(args.episodes)]
     if args.out is not None:
@@ -305,6 +339,8 @@ def _rebuild(args: argparse.Namespace) -> str:
         parts += ["--perception", args.perception]
     if args.budget_s is not None:
         parts += ["--budget-s", f"{args.budget_s:g}"]
+    if args.demo_action_noise:
+        parts += ["--demo-action-noise", f"{args.demo_action_noise:g}"]
     return shlex.join(parts)
 
 
