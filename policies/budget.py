@@ -20,7 +20,8 @@ __all__ = ["FINISH_RESERVE_S", "PREPARATION_SHARE", "Budget"]
 FINISH_RESERVE_S = 1.5
 
 
-#: Share of a budget that demonstrations and pretraining may take; the rest is for training and evaluation.
+#: Share of a budget that demonstrations and pretraining may take unless told otherwise; the rest is for
+#: training and evaluation.
 PREPARATION_SHARE = 0.5
 
 
@@ -36,11 +37,19 @@ class Budget:
         budget_s: The budget [s]; None: no budget (everything fits).
         started_s: When it started, on ``clock``.
         clock: Monotonic clock [s].
+        preparation_share: Share of the budget demonstrations and pretraining may take.
     """
 
-    def __init__(self, budget_s: float | None, started_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        budget_s: float | None,
+        started_s: float,
+        clock: Callable[[], float] = time.monotonic,
+        preparation_share: float = PREPARATION_SHARE,
+    ) -> None:
         self.budget_s = budget_s
         self.started_s = started_s
+        self.preparation_share = preparation_share
         self._clock = clock
         self.episode_s = 0.0
         self.step_s = 0.0
@@ -61,8 +70,8 @@ class Budget:
         return self.elapsed() + keep_s + FINISH_RESERVE_S > self.budget_s
 
     def preparing_fits(self) -> bool:
-        """More demonstrations or pretraining fit: less than :data:`PREPARATION_SHARE` of the budget is spent."""
-        return self.budget_s is None or self.elapsed() < PREPARATION_SHARE * self.budget_s
+        """More demonstrations or pretraining fit: less than the preparation's share of the budget is spent."""
+        return self.budget_s is None or self.elapsed() < self.preparation_share * self.budget_s
 
     def fits_episode(self, eval_episodes: int, horizon: int) -> bool:
         """One more episode and the last evaluation end within the budget (always, without a budget)."""

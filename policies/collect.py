@@ -42,9 +42,9 @@ class _WorkerTask(gym.Wrapper[Any, Any, Any, Any]):
         super().__init__(env)
         self.task_id = task_id
 
-    def demonstrations(self, count: int, seed: int, action_noise: float = 0.0) -> list[Episode]:
+    def demonstrations(self, count: int, seed: int) -> list[Episode]:
         """``count`` successful expert episodes seeded from ``seed`` (:func:`policies.demos.collect_demos`)."""
-        return collect_demos(self.env, expert_for(self.task_id), count, seed, action_noise=action_noise)
+        return collect_demos(self.env, expert_for(self.task_id), count, seed)
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         observation, _ = self.env.reset(**kwargs)
@@ -193,10 +193,9 @@ class OverlappedCollector(Collector):
         batch, _, terminated, truncated, _ = self._envs.step_wait()
         return _first(batch), bool(terminated[0]), bool(truncated[0])
 
-    def start_demonstrations(self, count: int, seed: int, action_noise: float = 0.0) -> None:
-        """Start collecting ``count`` expert demonstrations in the worker, seeded from ``seed`` (``action_noise``:
-        :func:`policies.demos.collect_demos`'s)."""
-        self._envs.call_async("demonstrations", count, seed, action_noise)
+    def start_demonstrations(self, count: int, seed: int) -> None:
+        """Start collecting ``count`` expert demonstrations in the worker, seeded from ``seed``."""
+        self._envs.call_async("demonstrations", count, seed)
 
     def finish_demonstrations(self) -> list[Episode]:
         """The demonstrations :meth:`start_demonstrations` asked for, once the worker has them.

@@ -15,11 +15,6 @@ layout. Without a file, episodes are generated with the task's scripted expert (
 the toy task's is :func:`policies.toy_env.toy_expert`; the simulation's is ``sim.expert.ScriptedExpert``, acting
 on what the learner observes (``observed=True``: the estimated site of ``train --blind`` or ``--perception``).
 Only successful expert episodes are kept (``info["is_success"]`` and not ``info["sim_unstable"]``).
-
-With ``action_noise`` the expert's demonstrations are perturbed as DART does (Laskey et al., "DART: Noise
-Injection for Robust Imitation Learning", CoRL 2017): the task executes the expert's action plus Gaussian
-noise on its motion (not on the jaw), and the episode records the expert's own action, so a learner cloning
-them also sees the states a slightly wrong action leads to, each labelled with the expert's correction.
 """
 
 from __future__ import annotations
@@ -71,27 +66,17 @@ class _FunctionController:
         return self.function(self.env, observation)
 
 
-#: Action components :func:`collect_demos`'s ``action_noise`` perturbs: the motion, not the jaw.
-MOTION = slice(0, 3)
-
-
 def rollout(
-    env: gym.Env[Any, Any],
-    act: Callable[[dict[str, np.ndarray]], np.ndarray],
-    seed: int | None,
-    perturb: Callable[[np.ndarray], np.ndarray] | None = None,
+    env: gym.Env[Any, Any], act: Callable[[dict[str, np.ndarray]], np.ndarray], seed: int | None
 ) -> tuple[Episode, bool]:
-    """Run one episode with ``act``; returns it and whether it succeeded at its final step.
-
-    ``perturb(action)`` is the action the task executes instead of ``act``'s (which the episode records).
-    """
+    """Run one episode with ``act``; returns it and whether it succeeded at its final step."""
     obs, _ = env.reset(seed=seed)
     o, ag, g, a, term = [obs["observation"]], [obs["achieved_goal"]], [], [], []
     success = False
     while True:
         action = np.asarray(act(obs), dtype=np.float32)
         g.append(obs["desired_goal"])
-        obs, _, terminated, truncated, info = env.step(action if perturb is None else perturb(action))
+        obs, _, terminated, truncated, info = env.step(action)
         o.append(obs["observation"])
         ag.append(obs["achieved_goal"])
         a.append(action)
@@ -134,13 +119,10 @@ def collect_demos(
     seed: int,
     max_attempts: int | None = None,
     on_success: Callable[[], None] | None = None,
-    action_noise: float = 0.0,
 ) -> list[Episode]:
     """``count`` successful expert episodes (failed ones are discarded), seeded from ``seed``.
 
-    ``on_success`` is called after each successful episode (a progress bar). ``action_noise``: the standard
-    deviation of the noise on the executed motion, as a fraction of the largest action (see the module
-    notes; episode ``seed + i`` draws it from its own generator, seeded ``seed + i``).
+    ``on_success`` is called after each successful episode (a progress bar).
 
     Raises:
         DemonstrationError: The expert did not succeed ``count`` times within ``max_attempts`` episodes.
@@ -152,8 +134,7 @@ def collect_demos(
         if len(episodes) == count:
             break
         controller.reset()
-        perturb = _perturbation(action_noise, seed + i) if action_noise > 0 else None
-        episode, success = rollout(env, controller, seed=seed + i, perturb=perturb)
+        episode, success = rollout(env, controller, seed=seed + i)
         if success:
             episodes.append(episode)
             if on_success is not None:
@@ -161,18 +142,6 @@ def collect_demos(
     if len(episodes) < count:
         raise DemonstrationError(f"the expert succeeded in only {len(episodes)} of {attempts} episodes")
     return episodes
-
-
-def _perturbation(noise: float, seed: int) -> Callable[[np.ndarray], np.ndarray]:
-    """The executed action: the expert's with Gaussian noise of std ``noise`` on its motion, within [-1, 1]."""
-    rng = np.random.default_rng(seed)
-
-    def perturb(action: np.ndarray) -> np.ndarray:
-        executed = np.array(action, dtype=np.float32)
-        executed[MOTION] = np.clip(executed[MOTION] + rng.normal(0.0, noise, executed[MOTION].shape), -1.0, 1.0)
-        return executed
-
-    return perturb
 
 
 #: Largest demonstrations file [bytes] and largest total of its arrays once read [bytes].

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from policies.budget import PREPARATION_SHARE
 from policies.config import TrainConfig
 
 __all__ = ["DEFAULT_RECIPE", "ROBUST_RECIPE", "SWEEP_VARY", "Recipe"]
@@ -50,8 +51,7 @@ class Recipe:
         vary: Train over these ranges (``train --vary``'s string) unless ``--vary`` says otherwise: every
             episode, demonstration and evaluation draws its conditions from them. None: the nominal task.
         budget_s: The whole command's wall-clock budget [s] unless ``--budget-s`` says otherwise; None: none.
-        demo_action_noise: Noise on the motion the expert's demonstrations execute, a fraction of the largest
-            action (:func:`policies.demos.collect_demos`); 0: as the expert acts.
+        preparation_share: Under a budget, the share of it demonstrations and pretraining may take.
     """
 
     name: str
@@ -64,7 +64,7 @@ class Recipe:
     overlap: bool = True
     vary: str | None = None
     budget_s: float | None = None
-    demo_action_noise: float = 0.0
+    preparation_share: float = PREPARATION_SHARE
 
 
 #: ``tissue-retract train`` without ``--algo``.
@@ -90,5 +90,4 @@ ROBUST_RECIPE = Recipe(
     stop_at_success=0.97,
     vary=SWEEP_VARY,
     budget_s=570.0,
-    demo_action_noise=0.3,
 )

@@ -34,7 +34,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from policies.algos import Agent, Dims, make_agent
-from policies.budget import Budget
+from policies.budget import PREPARATION_SHARE, Budget
 from policies.buffers import Episode, EpisodeBuffer, RewardFn
 from policies.checkpoint import (
     check_spaces,
@@ -86,9 +86,7 @@ class RunSpec:
             (:mod:`policies.collect`); False collects and then learns, in this process, as the paper's code.
         stop_at_success: End the run at the first evaluation with at least this success rate; its
             policy is ``policy.safetensors``. None: train all ``episodes``.
-        demo_action_noise: The expert's demonstrations execute their motion with Gaussian noise of this
-            standard deviation (a fraction of the largest action) and record the expert's own action
-            (:func:`policies.demos.collect_demos`); 0: as the expert acts.
+        preparation_share: Under a budget, the share of it that demonstrations and pretraining may take.
     """
 
     task_id: str
@@ -109,7 +107,7 @@ class RunSpec:
     started_s: float | None = None
     overlap: bool = False
     stop_at_success: float | None = None
-    demo_action_noise: float = 0.0
+    preparation_share: float = PREPARATION_SHARE
 
     def __post_init__(self) -> None:
         for name, low in (("seed", 0), ("episodes", 1), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
@@ -123,9 +121,9 @@ class RunSpec:
             isinstance(target, bool) or not (isinstance(target, int | float) and 0 < target <= 1)
         ):
             raise ConfigurationError("stop_at_success", self.stop_at_success, "a success rate in (0, 1]")
-        noise = self.demo_action_noise
-        if isinstance(noise, bool) or not (isinstance(noise, int | float) and 0.0 <= noise <= 1.0):
-            raise ConfigurationError("demo_action_noise", noise, "a fraction of the largest action in [0, 1]")
+        share = self.preparation_share
+        if isinstance(share, bool) or not (isinstance(share, int | float) and 0.0 < share <= 1.0):
+            raise ConfigurationError("preparation_share", share, "a share of the budget in (0, 1]")
 
 
 @dataclass
@@ -216,8 +214,8 @@ def _demonstrations(
     worker, if there is one, seeded after every seed the other half may try).
 
     Under a budget they are collected in chunks of :data:`DEMO_CHUNK` (alternately here and in the worker),
-    and collection stops, with fewer than asked, once half the budget is spent
-    (:data:`policies.budget.PREPARATION_SHARE`).
+    and collection stops, with fewer than asked, once the preparation's share of the budget is spent
+    (``RunSpec.preparation_share``).
     ``on_success(n)`` reports ``n`` more demonstrations collected.
     """
     if spec.demos == 0:
@@ -227,14 +225,13 @@ def _demonstrations(
     seed = _DEMO_SEED + 1000 * spec.seed
     tick = (lambda: on_success(1)) if on_success is not None else None
     worker = collector if isinstance(collector, OverlappedCollector) else None
-    noise = spec.demo_action_noise
     if budget is not None and budget.budget_s is not None:
         return _budgeted_demonstrations(spec, env, worker, budget, seed, on_success)
     if worker is None or spec.demos < 2:
-        return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=seed, on_success=tick, action_noise=noise)
+        return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=seed, on_success=tick)
     here = spec.demos // 2
-    worker.start_demonstrations(spec.demos - here, seed + default_attempts(here), noise)
-    episodes = collect_demos(env, expert_for(spec.task_id), here, seed=seed, on_success=tick, action_noise=noise)
+    worker.start_demonstrations(spec.demos - here, seed + default_attempts(here))
+    episodes = collect_demos(env, expert_for(spec.task_id), here, seed=seed, on_success=tick)
     there = worker.finish_demonstrations()
     if on_success is not None:
         on_success(len(there))
@@ -260,10 +257,8 @@ def _budgeted_demonstrations(
         started = time.monotonic()
         shared = worker is not None and k + 1 < len(sizes)
         if shared and worker is not None:
-            worker.start_demonstrations(sizes[k + 1], seeds[k + 1], spec.demo_action_noise)
-        episodes += collect_demos(
-            env, expert_for(spec.task_id), sizes[k], seed=seeds[k], on_success=tick, action_noise=spec.demo_action_noise
-        )
+            worker.start_demonstrations(sizes[k + 1], seeds[k + 1])
+        episodes += collect_demos(env, expert_for(spec.task_id), sizes[k], seed=seeds[k], on_success=tick)
         if shared and worker is not None:
             there = worker.finish_demonstrations()
             episodes += there
@@ -321,7 +316,8 @@ def train(spec: RunSpec, config: TrainConfig) -> TrainResult:
         env, eval_env = spec.env_wrapper(env), spec.env_wrapper(eval_env)
     collector = OverlappedCollector(task_id, spec.env_wrapper) if spec.overlap else SerialCollector(env)
     try:
-        return _train(spec, config, env, eval_env, collector, Budget(spec.budget_s, started))
+        budget = Budget(spec.budget_s, started, preparation_share=spec.preparation_share)
+        return _train(spec, config, env, eval_env, collector, budget)
     finally:
         collector.close()
         env.close()

@@ -15,7 +15,7 @@ from policies.algos import Dims
 from policies.collect import OverlappedCollector, SerialCollector, can_run_in_worker
 from policies.config import TrainConfig
 from policies.demos import collect_demos, expert_for
-from policies.toy_env import TOY_TASK_ID, toy_expert
+from policies.toy_env import TOY_TASK_ID
 from policies.trainer import RunSpec, _demonstrations, ensure_registered, train
 from psm_control.errors import ConfigurationError
 
@@ -62,29 +62,6 @@ def test_the_worker_collects_the_demonstrations_this_process_would() -> None:
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
 
 
-def test_noisy_demonstrations_record_the_experts_action_where_the_noise_led() -> None:
-    """With action noise each recorded action is the expert's for the state reached, and the noise changes
-    the states; the worker collects the same noisy demonstrations as this process."""
-    task = ensure_registered(TOY_TASK_ID)
-    env = gym.make(task)
-    overlapped = OverlappedCollector(task)
-    try:
-        noisy = collect_demos(env, expert_for(task), 2, seed=11, action_noise=0.5)
-        clean = collect_demos(env, expert_for(task), 2, seed=11)
-        overlapped.start_demonstrations(2, seed=11, action_noise=0.5)
-        there = overlapped.finish_demonstrations()
-        for episode in noisy:
-            for t in range(len(episode.action)):
-                observed = {"achieved_goal": episode.achieved_goal[t], "desired_goal": episode.desired_goal[t]}
-                np.testing.assert_allclose(episode.action[t], toy_expert(env, observed), atol=1e-6)
-    finally:
-        overlapped.close()
-        env.close()
-    assert not np.allclose(noisy[0].achieved_goal[1], clean[0].achieved_goal[1])
-    for a, b in zip(noisy, there, strict=True):
-        np.testing.assert_array_equal(a.achieved_goal, b.achieved_goal)
-
-
 def test_a_run_with_a_worker_splits_its_demonstrations_over_distinct_episodes() -> None:
     """Half the demonstrations come from this process, the rest from the worker, none of them twice."""
     spec = RunSpec(TOY_TASK_ID, seed=4, demos=5, overlap=True)
@@ -126,7 +103,7 @@ def test_a_wrapper_that_cannot_reach_a_worker_is_refused_before_anything_runs(tm
 _CHILD = """
 import sys
 from policies.collect import OverlappedCollector
-from policies.toy_env import TOY_TASK_ID, toy_expert
+from policies.toy_env import TOY_TASK_ID
 from policies.trainer import ensure_registered
 
 collector = OverlappedCollector(ensure_registered(TOY_TASK_ID))

@@ -40,6 +40,7 @@ import gymnasium as gym
 
 from hardware_if.perceived_env import camera_task
 from hardware_if.registered_env import RegisteredTask
+from policies.budget import PREPARATION_SHARE
 from policies.config import TrainConfig
 from policies.recipe import DEFAULT_RECIPE, ROBUST_RECIPE, Recipe
 from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
@@ -105,14 +106,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f"(default --vary {ROBUST_RECIPE.vary}), from {ROBUST_RECIPE.demos} demonstrations drawn over them, "
         f"within a {ROBUST_RECIPE.budget_s:g} s budget (default --budget-s), keeping the policy best on "
         "randomized held-out episodes; not with --algo",
-    )
-    parser.add_argument(
-        "--demo-action-noise",
-        type=float_in(0.0, 1.0),
-        default=None,
-        help="the expert's demonstrations execute their motion with Gaussian noise of this std (a fraction of "
-        "the largest action) and record the expert's own action, as DART does (default: "
-        f"{ROBUST_RECIPE.demo_action_noise:g} with --robust, else 0)",
     )
     parser.add_argument("--demos-file", type=Path, default=None, help="read demonstrations from this .npz")
     parser.add_argument("--seed", type=int_in(0, MAX_SEED), default=1, help=f"seed 0-{MAX_SEED} (default: 1)")
@@ -187,8 +180,6 @@ def run(args: argparse.Namespace) -> int:
         args.vary = recipe.vary
     if recipe is not None and args.budget_s is None:
         args.budget_s = recipe.budget_s
-    if args.demo_action_noise is None:
-        args.demo_action_noise = recipe.demo_action_noise if recipe is not None else 0.0
     args.task = ensure_registered(args.task)
     run_name = args.algo if recipe is None else recipe.name
     out = args.out if args.out is not None else Path("runs") / args.task / f"{run_name}-s{args.seed}"
@@ -214,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
         started_s=_command_started_s() if sys.argv[1:2] == ["train"] else None,  # else: called in-process
         overlap=recipe is not None and recipe.overlap,
         stop_at_success=None if recipe is None else recipe.stop_at_success,
-        demo_action_noise=args.demo_action_noise,
+        preparation_share=recipe.preparation_share if recipe is not None else PREPARATION_SHARE,
     )
     if recipe is not None:
         print(
@@ -339,8 +330,6 @@ def _rebuild(args: argparse.Namespace) -> str:
         parts += ["--perception", args.perception]
     if args.budget_s is not None:
         parts += ["--budget-s", f"{args.budget_s:g}"]
-    if args.demo_action_noise:
-        parts += ["--demo-action-noise", f"{args.demo_action_noise:g}"]
     return shlex.join(parts)
 
 
