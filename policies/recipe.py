@@ -90,4 +90,5 @@ ROBUST_RECIPE = Recipe(
     stop_at_success=0.97,
     vary=SWEEP_VARY,
     budget_s=570.0,
+    preparation_share=0.8,
 )
