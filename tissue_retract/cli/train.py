@@ -1,7 +1,8 @@
 """``tissue-retract train``: train a policy on a task, by the default recipe or one of the paper's algorithms.
 
 Without ``--algo`` the default recipe runs (:mod:`policies.recipe`: fast, both cores, early stopping);
-``--algo`` picks DDPG+HER, SQIL, DDPGBC, CoL or DEX, trained as the paper does.
+``--robust`` runs it over the robustness sweep's ranges within a 10-minute budget; ``--algo`` picks
+DDPG+HER, SQIL, DDPGBC, CoL or DEX, trained as the paper does.
 
 Writes to ``--out``: ``policy.safetensors`` (the deterministic actor, for ``evaluate`` and ``deploy``),
 ``resume.safetensors`` (everything needed to continue: running the same command again resumes from
