@@ -65,7 +65,8 @@ class RunSpec:
     Attributes:
         task_id: Gymnasium id of the goal task.
         seed: Seed of the run (networks, exploration, episodes).
-        episodes: Training episodes.
+        episodes: Training episodes (0: the demonstrations and pretraining alone, evaluated once when the
+            run stops at a target).
         demos: Demonstration episodes (ignored by DDPG).
         out_dir: Directory of checkpoints, TensorBoard logs and ``eval.csv``.
         eval_every: Evaluate and checkpoint every this many episodes (and at the end).
@@ -110,7 +111,7 @@ class RunSpec:
     preparation_share: float = PREPARATION_SHARE
 
     def __post_init__(self) -> None:
-        for name, low in (("seed", 0), ("episodes", 1), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
+        for name, low in (("seed", 0), ("episodes", 0), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigurationError(name, value, f"an integer >= {low}")

@@ -318,9 +318,9 @@ def test_train_takes_the_sweeps_vary_and_records_it(tmp_path: Path, capsys: pyte
 def test_train_robust_trains_over_the_sweeps_ranges_by_default(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """--robust is the robust recipe: the sweep's --vary and noisy demonstrations unless told otherwise."""
-    args = ["train", "--task", "lift", "--robust", "--demos", "2", "--episodes", "1", "--eval-every", "1"]
-    args += ["--eval-episodes", "1", "--budget-s", "120", "--out", str(tmp_path), "--no-progress", "--no-tensorboard"]
+    """--robust clones over the sweep's --vary unless told otherwise, scores the clone once and trains no further."""
+    args = ["train", "--task", "lift", "--robust", "--demos", "2", "--eval-episodes", "1", "--budget-s", "120"]
+    args += ["--out", str(tmp_path), "--no-progress", "--no-tensorboard"]
     for item in TINY:
         args += ["--set", item]
     with warnings.catch_warnings():
@@ -331,7 +331,8 @@ def test_train_robust_trains_over_the_sweeps_ranges_by_default(
     assert f"every episode drawn over {ROBUST_RECIPE.vary}" in out and "budget 120 s" in out
     meta = load_checkpoint(tmp_path / "policy.safetensors").meta
     assert meta["observation"] == f"task, randomized over {ROBUST_RECIPE.vary}"
-    assert "--robust" in shlex.split(meta["command"])
+    assert "--robust" in shlex.split(meta["command"]) and meta["progress"]["episodes"] == 0
+    assert [row["episode"] for row in csv.DictReader((tmp_path / "eval.csv").open())] == ["0"]
 
 
 def test_train_robust_and_algo_are_refused_together(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -103,10 +103,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--robust",
         action="store_true",
-        help=f"the {ROBUST_RECIPE.name!r} recipe: trained and evaluated over the robustness sweep's ranges "
-        f"(default --vary {ROBUST_RECIPE.vary}), from {ROBUST_RECIPE.demos} demonstrations drawn over them, "
-        f"within a {ROBUST_RECIPE.budget_s:g} s budget (default --budget-s), keeping the policy best on "
-        "randomized held-out episodes; not with --algo",
+        help=f"the {ROBUST_RECIPE.name!r} recipe: cloned from {ROBUST_RECIPE.demos} demonstrations over the "
+        f"robustness sweep's ranges (default --vary {ROBUST_RECIPE.vary}) and scored on "
+        f"{ROBUST_RECIPE.eval_episodes} randomized held-out episodes, within a {ROBUST_RECIPE.budget_s:g} s "
+        "budget (default --budget-s); --episodes N trains on after the cloning; not with --algo",
     )
     parser.add_argument("--demos-file", type=Path, default=None, help="read demonstrations from this .npz")
     parser.add_argument("--seed", type=int_in(0, MAX_SEED), default=1, help=f"seed 0-{MAX_SEED} (default: 1)")
