@@ -167,6 +167,26 @@ def test_bench_train_times_the_recipe_and_confirms_on_unseen_episodes(tmp_path: 
     assert "TissueRetract-Lift-v0" in result.stdout.splitlines()[-1]
 
 
+@pytest.mark.slow
+def test_bench_train_robust_confirms_beside_the_expert_on_the_sweep(tmp_path: Path) -> None:
+    """`bench train --robust`: train --robust per seed, confirmed on the sweep beside the expert, whose episodes
+    the second seed resumes from the first's instead of running them again."""
+    path = tmp_path / "train.json"
+    args = ("--robust", "--tasks", "lift", "--seeds", "4", "5", "--confirm-episodes", "2", "--budget-s", "15")
+    result = _cli("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path))
+    assert result.returncode == 0, result.stderr
+    runs = json.loads(path.read_text())["runs"]
+    for run in runs:
+        assert run["exit_status"] == 0 and "recipe robust" in Path(run["log"]).read_text()
+        assert run["reached"] == (run["confirmed_success"] >= run["expert_success"] - 0.08)
+        line = f"confirmed {100 * run['confirmed_success']:.1f} % on 2 sweep trials, the expert"
+        assert line in result.stdout
+    task = tmp_path / "runs" / "TissueRetract-Lift-v0"
+    first, second = (task / f"s{seed}" / "sweep" / "expert_episodes.jsonl" for seed in (4, 5))
+    assert first.read_text() == second.read_text()
+    assert "--seed 1000" in (task / "s5" / "sweep" / "report.md").read_text()
+
+
 def test_tissue_test_prints_and_writes_both_tests(tmp_path: Path) -> None:
     """`tissue-test` measures tension within 10 % of E t W eps and writes both tests with their curves."""
     out = tmp_path / "material.json"
