@@ -46,7 +46,7 @@ def test_no_module_imports_a_higher_layer() -> None:
     ("source", "expected"),
     [
         ("import policies.checkpoint\n", 1),
-        ("def f():\n    from hardware_if.deploy import deploy\n", 1),
+        ("def f():\n    from hardware_if.deploy.run import deploy\n", 1),
         ("from sim.envs import make\nimport numpy\n", 0),
     ],
 )

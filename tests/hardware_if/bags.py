@@ -8,7 +8,7 @@ import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from hardware_if.joint_logs import JOINT_NAMES
+from hardware_if.wrench.joint_logs import JOINT_NAMES
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from hardware_if.arm_pose import JAW_START_TOLERANCE_RAD, start_offset
+from hardware_if.client.arm_pose import JAW_START_TOLERANCE_RAD, start_offset
 
 START = np.array([0.0, 0.0, 0.12, 0.0, 0.0, 0.0])
 

@@ -8,8 +8,8 @@ import sys
 #: Run in a fresh interpreter: freezing the test process's own heap would change the other tests' collector.
 _PROBE = """
 import gc
-from hardware_if.gc_pauses import freeze_startup_heap
-from hardware_if.sim_task import TaskArm
+from hardware_if.common.gc_pauses import freeze_startup_heap
+from hardware_if.console.sim_task import TaskArm
 
 arm = TaskArm("lift", seed=2)
 before = len(gc.get_objects())

@@ -9,7 +9,7 @@ import pytest
 from bags import write_bag
 from rosbags.rosbag2 import StoragePlugin
 
-from hardware_if.joint_logs import (
+from hardware_if.wrench.joint_logs import (
     LND_COUPLING,
     LogLayoutError,
     MissingTopicError,

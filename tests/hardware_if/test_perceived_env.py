@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import sim.envs
-from hardware_if.perceived_env import PerceivedTask
+from hardware_if.client.perceived_env import PerceivedTask
 from policies.perception.frames import true_sites
 from sim.endoscope import Endoscope, StereoFrame
 from sim.evaluation import run_episode, summarize

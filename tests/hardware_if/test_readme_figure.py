@@ -7,7 +7,7 @@ from pathlib import Path
 
 from PIL import Image
 
-from hardware_if.replay_figure import LAYOUT_KEY
+from hardware_if.recording.replay_figure import LAYOUT_KEY
 from tests.conftest import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]

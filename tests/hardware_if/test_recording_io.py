@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from hardware_if.recording import Recorder, read_recording
-from hardware_if.recording_io import RecordingError
+from hardware_if.recording.checked_file import RecordingError
+from hardware_if.recording.recorder import Recorder, read_recording
 from tissue_retract.fault_setups import small_filesystem
 
 PAYLOAD = {"q": list(range(40)), "text": "x" * 200}
@@ -102,8 +102,8 @@ def test_file_size_limit_is_a_hold(tmp_path: Path) -> None:
     path = tmp_path / "run.mcap"
     script = f"""
 import resource, signal
-from hardware_if.recording import Recorder
-from hardware_if.recording_io import RecordingError
+from hardware_if.recording.recorder import Recorder
+from hardware_if.recording.checked_file import RecordingError
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
 recorder = Recorder({str(path)!r})

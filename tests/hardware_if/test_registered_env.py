@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import sim.envs
-from hardware_if.registered_env import RegisteredTask
+from hardware_if.client.registered_env import RegisteredTask
 from sim.expert import ScriptedExpert
 
 #: A Task I seed the scripted expert grasps and lifts.

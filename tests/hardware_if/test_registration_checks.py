@@ -7,8 +7,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from hardware_if.registration_checks import check_registration
-from hardware_if.sim_task import PLACEABLE_SITES, TaskArm
+from hardware_if.client.registration_checks import check_registration
+from hardware_if.console.sim_task import PLACEABLE_SITES, TaskArm
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from hardware_if.replay import Recording, load_recording
-from hardware_if.replay_figure import draw_recording, episode_spans
+from hardware_if.recording.replay import Recording, load_recording
+from hardware_if.recording.replay_figure import draw_recording, episode_spans
 from tissue_retract.faults import AT_VARIABLE
 
 #: Steps of a Task I episode and the policy period of the simulation [s].

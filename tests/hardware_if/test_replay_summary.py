@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hardware_if.replay import RecordingSummary
+from hardware_if.recording.replay import RecordingSummary
 
 
 def test_a_null_force_reads_not_finite() -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hardware_if.sim_task import REST_AFTER_STEPS, TaskArm
+from hardware_if.console.sim_task import REST_AFTER_STEPS, TaskArm
 
 
 def test_an_idle_scene_sleeps_and_a_new_setpoint_wakes_it() -> None:

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from hardware_if import session
+from hardware_if.common import session
 
 
 class _Log:

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hardware_if.task_estimate import JawGraspSensing, JawReading, TaskEstimate
+from hardware_if.client.task_estimate import JawGraspSensing, JawReading, TaskEstimate
 from psm_control.errors import ConfigurationError
 
 SITE = np.array([0.01, 0.02, 0.015])

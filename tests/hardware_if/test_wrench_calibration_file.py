@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from hardware_if.wrench_calibration import WrenchCalibration, read_calibration
+from hardware_if.wrench.calibration import WrenchCalibration, read_calibration
 from psm_control.errors import ConfigurationError
 from tests.conftest import run_cli
 

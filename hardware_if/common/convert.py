@@ -1,6 +1,6 @@
 """Conversions between ROS 2 messages and the project's values (arrays, 4x4 poses, typed states).
 
-Joint vectors follow the dVRK order of :data:`hardware_if.crtk.JOINT_NAMES`; a ``JointState`` whose
+Joint vectors follow the dVRK order of :data:`hardware_if.common.crtk.JOINT_NAMES`; a ``JointState`` whose
 names are in another order is reordered by name, and one that lacks a joint is rejected. Poses are 4x4
 homogeneous transforms [m]; ROS quaternions are (x, y, z, w).
 """
@@ -16,7 +16,7 @@ from builtin_interfaces.msg import Time  # type: ignore[import-untyped]
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 
-from hardware_if.crtk import JOINT_NAMES
+from hardware_if.common.crtk import JOINT_NAMES
 from psm_control.errors import JointVectorError
 
 __all__ = [

@@ -15,8 +15,8 @@ robot with no perception stack these follow from one registration and the consol
   began. When the jaw opens the flap recoils and the site is the registered one again.
 
 :class:`TaskEstimate` is plain NumPy, fed one :class:`JawReading` and grasp point per policy step, so the
-same estimator runs over ROS (:class:`hardware_if.remote_task.RemoteTask`) and in the simulation
-(:class:`hardware_if.registered_env.RegisteredTask`).
+same estimator runs over ROS (:class:`hardware_if.client.remote_task.RemoteTask`) and in the simulation
+(:class:`hardware_if.client.registered_env.RegisteredTask`).
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ The data flow is the simulation's: each policy step turns the 5-D action into a
 :class:`~psm_control.commands.CartesianDelta`, gives it to :class:`safety.chain.ControlChain` once, then
 ticks the chain at the control rate and sends each verified joint command to the backend. For
 ``target="sim"`` the backend is the task environment's (:func:`sim.evaluation.run_episode`); for
-``target="dvrk"`` it is :class:`~hardware_if.psm_client.PsmClient` (the same chain, unchanged) and the
-observation comes from :class:`~hardware_if.remote_task.RemoteTask`.
+``target="dvrk"`` it is :class:`~hardware_if.client.psm_client.PsmClient` (the same chain, unchanged) and the
+observation comes from :class:`~hardware_if.client.remote_task.RemoteTask`.
 
 A dry run (``dry_run=True``, dVRK only) listens to the live arm and computes, logs and records every
 command, but the client has no command publishers at all: nothing goes out on a motion topic. Its
@@ -17,15 +17,15 @@ One fault path, the same for the simulation, the dVRK and a dry run: a policy th
 ``SystemExit`` included) or returns something other than 5 finite numbers, a policy step slower than its
 budget (default one policy period), malformed or non-finite data on any subscribed topic, an arm not
 ENABLED, homed and idle when an episode starts (waited for up to ``wait_s``), a stale or vanished arm, a
-tracking error (the deadman, :mod:`hardware_if.deadman`), another commander or console of the arm
-(:mod:`hardware_if.commander_watch`, checked before anything reaches a console and while it runs), an arm
+tracking error (the deadman, :mod:`hardware_if.client.deadman`), another commander or console of the arm
+(:mod:`hardware_if.common.commander_watch`, checked before anything reaches a console and while it runs), an arm
 not at the episode's start in a dry run or after the move back, a tracking divergence
-(:mod:`hardware_if.arm_pose`), a recording that cannot be written (:mod:`hardware_if.recording_io`), or
+(:mod:`hardware_if.client.arm_pose`), a recording that cannot be written (:mod:`hardware_if.recording.checked_file`), or
 any other error while the arm is commanded all end the same way: nothing new is commanded (the arm keeps
 the last verified command), the fault is recorded as a ``hold`` event with its reason and data, the report
 says ``HOLD: <reason>`` and the exit status is :data:`EXIT_HOLD`. SIGINT, SIGTERM and SIGHUP stop between
 two control ticks, close the recording and exit with 128 + the signal number (130, 143, 129). Every run is
-recorded (:mod:`hardware_if.recording`).
+recorded (:mod:`hardware_if.recording.recorder`).
 """
 
 from __future__ import annotations
@@ -46,20 +46,20 @@ from typing import Any
 import numpy as np
 
 import sim.envs
-from hardware_if.arm_pose import TrackingWatch, return_to_start, start_offset
-from hardware_if.commander_watch import DISCOVERY_S, console_kind, served_by
-from hardware_if.endoscope_stream import DEFAULT_RIG, camera_topics
-from hardware_if.errors import DvrkError, HoldError
-from hardware_if.gc_pauses import freeze_startup_heap
-from hardware_if.perceived_env import camera_task
-from hardware_if.readiness import describe_operating_state, dry_run_wait_hint, is_ready_state
-from hardware_if.recording import Recorder
-from hardware_if.recording_io import RecordingError
-from hardware_if.registration import console_base_frame
-from hardware_if.registration_checks import check_registration
-from hardware_if.session import ros_session
-from hardware_if.task_estimate import TaskEstimate, as_point, format_point
-from hardware_if.wrench_calibration import WrenchCalibration
+from hardware_if.client.arm_pose import TrackingWatch, return_to_start, start_offset
+from hardware_if.client.perceived_env import camera_task
+from hardware_if.client.readiness import describe_operating_state, dry_run_wait_hint, is_ready_state
+from hardware_if.client.registration import console_base_frame
+from hardware_if.client.registration_checks import check_registration
+from hardware_if.client.task_estimate import TaskEstimate, as_point, format_point
+from hardware_if.common.commander_watch import DISCOVERY_S, console_kind, served_by
+from hardware_if.common.errors import DvrkError, HoldError
+from hardware_if.common.gc_pauses import freeze_startup_heap
+from hardware_if.common.session import ros_session
+from hardware_if.console.endoscope_stream import DEFAULT_RIG, camera_topics
+from hardware_if.recording.checked_file import RecordingError
+from hardware_if.recording.recorder import Recorder
+from hardware_if.wrench.calibration import WrenchCalibration
 from policies.resolve import resolve_policy
 from policies.shipped import CAMERA, PRETRAINED, pretrained_path, variant_of
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
@@ -156,7 +156,7 @@ class DeployOptions:
         live: Serve the 3-D scene for the Foxglove app on ws://127.0.0.1 at this port (0 picks one);
             None serves nothing. The recording holds the same scene either way.
         site: The registered grasp site [m] in ``<arm>_base`` (dVRK): the task state then comes from it,
-            the goal and the jaw (:class:`~hardware_if.remote_task.RegisteredSite`), not from the task
+            the goal and the jaw (:class:`~hardware_if.client.remote_task.RegisteredSite`), not from the task
             topics. None: the ``/<arm>/task/*`` topics.
         goal: Where the site must go [m] in ``<arm>_base``, with ``site``; None: the task's nominal goal
             about the site (:func:`sim.envs.nominal_goal`).
@@ -165,7 +165,7 @@ class DeployOptions:
             bound for the console's uncompensated ``measured_cf``.
         force_sensing_source: What that bound is from, for the run-start warning (dVRK).
         wrench_calibration: The force-sensing calibration to take the force with (dVRK); None: ``measured_cf``.
-        perception: ``camera[:MODEL]``: the site from the endoscope's images (:mod:`hardware_if.perceived_env`).
+        perception: ``camera[:MODEL]``: the site from the endoscope's images (:mod:`hardware_if.client.perceived_env`).
         texture: The flap's texture image file (sim).
         image_timeout_s: With ``perception`` on a dVRK: endoscope images older than this hold the arm [s].
         endoscope_rig: With ``perception`` on a dVRK: the stereo rig's name (``/<rig>/left/image_raw`` ...).
@@ -632,8 +632,8 @@ def _deploy_dvrk(
     options: DeployOptions, report: DeployReport, recorder: Recorder, echo: Any, stopper: _Stopper
 ) -> None:
     # These import rclpy (the ros extra), which must come after the ROS environment is set.
-    from hardware_if.psm_client import PsmClient
-    from hardware_if.remote_task import RegisteredSite, RemoteTask, TaskListener
+    from hardware_if.client.psm_client import PsmClient
+    from hardware_if.client.remote_task import RegisteredSite, RemoteTask, TaskListener
 
     rate_hz = options.rate_hz if options.rate_hz is not None else 100.0
     base = options.safety_config if options.safety_config is not None else SafetyConfig()
@@ -662,7 +662,7 @@ def _deploy_dvrk(
         client.start()
         listener: Any  # TaskListener, RegisteredSite or CameraSite: the task source interface
         if options.perception is not None:
-            from hardware_if.camera_site import CameraSite  # rclpy, as above
+            from hardware_if.client.camera_site import CameraSite  # rclpy, as above
             from policies.perception import load_site_estimator  # torch's network: only where the camera is used
 
             estimator = load_site_estimator(options.perception.partition(":")[2] or None)

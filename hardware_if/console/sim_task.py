@@ -1,6 +1,6 @@
 """A task's PyBullet tissue scene behind the simulated dVRK (``tissue-retract sim-dvrk --task ID``).
 
-:class:`TaskArm` is an :class:`~hardware_if.arm_model.ArmModel` that owns one task environment
+:class:`TaskArm` is an :class:`~hardware_if.console.arm_model.ArmModel` that owns one task environment
 (:func:`sim.envs.make`): the arm follows the joint set-points the console receives, the flap, the grasp
 and the tissue force are the simulation's own, and the force goes out on ``body/measured_cf``. The
 environment is driven through its public ``step``: its controller is replaced by :class:`SetpointFollower`,
@@ -9,7 +9,7 @@ ignored), so the simulation's physics, grasp and tissue-force code run unchanged
 
 A policy also needs the grasp site, the goal and whether the jaw holds the tissue. On a real dVRK a
 perception node supplies them, or an operator's registration and the jaw
-(:mod:`hardware_if.task_estimate`). Here :class:`TaskTopics` publishes the simulation's ground truth on
+(:mod:`hardware_if.client.task_estimate`). Here :class:`TaskTopics` publishes the simulation's ground truth on
 extra, simulation-only topics under ``/<arm>/task/`` (see :data:`TASK_TOPICS`); a ``blind`` arm serves no
 such topic and reports its jaw as a real one on tissue: stalled open on the held flap
 (:meth:`sim.grasp.GraspParams.measured_jaw`), with a squeezing effort. :class:`TruthLog` writes the ground
@@ -28,10 +28,10 @@ from typing import IO, Any
 import numpy as np
 
 import sim.envs
-from hardware_if.arm_model import ArmSample
-from hardware_if.crtk import periodic_qos
-from hardware_if.endoscope_stream import EndoscopeStream, SceneState
-from hardware_if.motion import inverse_kinematics
+from hardware_if.common.crtk import periodic_qos
+from hardware_if.console.arm_model import ArmSample
+from hardware_if.console.endoscope_stream import EndoscopeStream, SceneState
+from hardware_if.console.motion import inverse_kinematics
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from safety.config import SafetyConfig
 from safety.force_bound import ForceBound
@@ -382,7 +382,7 @@ class TaskTopics:
     """Publishes a :class:`TaskArm`'s ground truth on ``/<arm>/task/*`` and serves ``task/reset``.
 
     Args:
-        node: The :class:`~hardware_if.sim_dvrk.SimulatedPsm` serving the arm (its base frame is
+        node: The :class:`~hardware_if.console.sim_dvrk.SimulatedPsm` serving the arm (its base frame is
             updated when a reset moves the RCM).
         arm_model: The task scene.
     """
@@ -428,7 +428,7 @@ class TaskTopics:
         self._worker.join(timeout=10.0)
 
     def _publish(self) -> None:
-        from hardware_if import convert  # the ros extra (message types), as above
+        from hardware_if.common import convert  # the ros extra (message types), as above
 
         while not self._finished.empty():
             seed, base_frame = self._finished.get()

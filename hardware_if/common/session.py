@@ -11,8 +11,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from hardware_if.errors import RosNotAvailableError
-from hardware_if.executor import make_executor
+from hardware_if.common.errors import RosNotAvailableError
+from hardware_if.common.executor import make_executor
 
 __all__ = [
     "SPIN_JOIN_TIMEOUT_S",
@@ -104,7 +104,7 @@ class SpinThread:
     """A node spun by an executor of its own on a daemon thread, until :meth:`close` destroys it.
 
     The dVRK client, the task listener and the camera's image node each spin this way, with
-    ``spin_once`` in a loop (:mod:`hardware_if.executor` says why not ``spin()``). A callback that raises
+    ``spin_once`` in a loop (:mod:`hardware_if.common.executor` says why not ``spin()``). A callback that raises
     is logged and the loop goes on; a shut-down context ends it.
 
     Args:

@@ -208,7 +208,7 @@ def serve(task: str, texture: str | None, rig: str, connection: Connection) -> N
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import CameraInfo, Image
 
-    from hardware_if.crtk import periodic_qos
+    from hardware_if.common.crtk import periodic_qos
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _stop)

@@ -1,7 +1,7 @@
 """A simulated task seen as a robot with no perception stack sees it (``evaluate --blind``).
 
 :class:`RegisteredTask` wraps a task environment and replaces what a camera would supply with
-:class:`~hardware_if.task_estimate.TaskEstimate`: the site an operator registered (the true site plus a
+:class:`~hardware_if.client.task_estimate.TaskEstimate`: the site an operator registered (the true site plus a
 registration error of ``registration_error_m`` in a random direction, drawn per episode from the episode
 seed), the goal the operator was given (the episode's true goal, as ``sim-dvrk --blind`` prints it, or
 the task's nominal goal about the registered site), and a grasp sensed by a jaw that stalls on the flap
@@ -28,7 +28,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hardware_if.task_estimate import JawReading, TaskEstimate
+from hardware_if.client.task_estimate import JawReading, TaskEstimate
 from psm_control.errors import ConfigurationError
 
 __all__ = ["GOAL_SOURCES", "RegisteredTask"]

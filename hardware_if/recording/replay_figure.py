@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from hardware_if.replay import Recording, answers
+from hardware_if.recording.replay import Recording, answers
 from psm_control.robot import PsmModel
 
 __all__ = ["LAYOUT_KEY", "EpisodeSpan", "draw_recording", "episode_spans", "figure_layout", "plot_recording"]

@@ -26,7 +26,7 @@ import errno
 import os
 from pathlib import Path
 
-from hardware_if.errors import HoldError
+from hardware_if.common.errors import HoldError
 
 __all__ = ["RESERVE_BYTES", "CheckedFile", "RecordingError", "describe_os_error"]
 

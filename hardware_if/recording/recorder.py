@@ -27,9 +27,9 @@ the last second. :func:`read_recording` reads such a file, which lacks its summa
 stream reader, and says so (:class:`RecordingRead`).
 
 A file that cannot be written (a full disk, a folder that vanishes or turns read-only, any write error)
-raises :class:`~hardware_if.recording_io.RecordingError`, a hold naming the file and the error, at once
+raises :class:`~hardware_if.recording.checked_file.RecordingError`, a hold naming the file and the error, at once
 and once. The torn end is cut off, and what is written afterwards (the hold, the report) is appended as
-plain records into room kept for them from the start (:data:`~hardware_if.recording_io.RESERVE_BYTES`);
+plain records into room kept for them from the start (:data:`~hardware_if.recording.checked_file.RESERVE_BYTES`);
 the file then reads as far as it got.
 """
 
@@ -51,7 +51,7 @@ from mcap.records import Channel, Footer, Message
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
-from hardware_if.recording_io import CheckedFile, RecordingError, describe_os_error
+from hardware_if.recording.checked_file import CheckedFile, RecordingError, describe_os_error
 from sim.scene_stream import LOG_TOPIC, SceneSink, log_message
 
 __all__ = ["CHANNELS", "CHUNK_SIZE_BYTES", "FLUSH_PERIOD_S", "Recorder", "RecordingRead", "read_recording"]

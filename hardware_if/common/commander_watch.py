@@ -28,7 +28,7 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
-from hardware_if.crtk import COMMAND_TOPICS, CONSOLE_INPUT_TOPICS, ArmTopics
+from hardware_if.common.crtk import COMMAND_TOPICS, CONSOLE_INPUT_TOPICS, ArmTopics
 
 __all__ = [
     "COMMANDED_TOPICS",

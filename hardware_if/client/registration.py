@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from hardware_if.task_estimate import as_point, format_point
+from hardware_if.client.task_estimate import as_point, format_point
 from psm_control.errors import ConfigurationError, TissueRetractError
 from psm_control.inputs import read_text
 from psm_control.robot import PsmModel
@@ -86,7 +86,7 @@ def grasp_point(client: Any, configuration: Any) -> np.ndarray:
     base frame), so the point is in the frame the console reports poses in.
 
     Args:
-        client: A :class:`~hardware_if.psm_client.PsmClient` (or anything with ``measure`` and ``pose``).
+        client: A :class:`~hardware_if.client.psm_client.PsmClient` (or anything with ``measure`` and ``pose``).
         configuration: The arm's :class:`~psm_control.robot.PsmConfiguration`, updated in place.
     """
     measured = client.measure()

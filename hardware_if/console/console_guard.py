@@ -4,7 +4,7 @@ A second ``sim-dvrk --arm PSM1`` on a domain where PSM1 is already served would 
 home and servo commands as the first, and a client would see two arms in one. :func:`other_consoles`
 looks for a console that already serves the arm before this one serves anything: it waits up to
 :data:`CONSOLE_DISCOVERY_S` for discovery to show one (a newcomer hears the participants already there
-within one of their announcement periods, :data:`~hardware_if.commander_watch.DISCOVERY_S`).
+within one of their announcement periods, :data:`~hardware_if.common.commander_watch.DISCOVERY_S`).
 
 :class:`CommandSources` is the console reporting, as a dVRK console reports its faults, that commands
 reach it from more than one program: on each :data:`SOURCES_PERIOD_S` in which commands arrived, it reads
@@ -19,8 +19,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from hardware_if.commander_watch import DISCOVERY_S, NAME_WAIT_S, UNNAMED, node_name, served_by
-from hardware_if.crtk import COMMAND_TOPICS, CONSOLE_INPUT_TOPICS
+from hardware_if.common.commander_watch import DISCOVERY_S, NAME_WAIT_S, UNNAMED, node_name, served_by
+from hardware_if.common.crtk import COMMAND_TOPICS, CONSOLE_INPUT_TOPICS
 
 __all__ = ["CONSOLE_DISCOVERY_S", "SOURCES_PERIOD_S", "CommandSources", "other_consoles"]
 
@@ -35,7 +35,7 @@ def other_consoles(node: Any, arm: str, timeout_s: float = CONSOLE_DISCOVERY_S) 
     """The nodes already serving ``arm`` (publishing its ``measured_js``) on ``node``'s domain, or [].
 
     Call it before ``node`` publishes ``measured_js`` itself. Returns as soon as one is seen (and named, or
-    :data:`~hardware_if.commander_watch.NAME_WAIT_S` later), else after ``timeout_s``.
+    :data:`~hardware_if.common.commander_watch.NAME_WAIT_S` later), else after ``timeout_s``.
     """
     deadline = time.monotonic() + timeout_s
     named_by = float("inf")

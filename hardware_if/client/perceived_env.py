@@ -1,6 +1,6 @@
 """A simulated task seen through the endoscope (``--perception camera``).
 
-:class:`PerceivedTask` is :class:`~hardware_if.registered_env.RegisteredTask` with the site registered by
+:class:`PerceivedTask` is :class:`~hardware_if.client.registered_env.RegisteredTask` with the site registered by
 the camera instead of an operator: at each reset it renders the endoscope's stereo pair of the flap at
 rest (with the arm at its start pose in view) under a randomized appearance drawn from the episode seed,
 and the site estimator's estimate of the episode's site becomes the registered site. From there the
@@ -17,7 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hardware_if.registered_env import RegisteredTask
+from hardware_if.client.registered_env import RegisteredTask
 from sim.endoscope import Appearance
 from sim.tissue import SITE_NAMES
 

@@ -1,4 +1,4 @@
-"""Summarising and plotting a deploy or dry-run recording (:mod:`hardware_if.recording`).
+"""Summarising and plotting a deploy or dry-run recording (:mod:`hardware_if.recording.recorder`).
 
 Needs no ROS: a recording is plain MCAP with JSON channels.
 """
@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from hardware_if.crtk import JOINT_NAMES
-from hardware_if.recording import read_recording
+from hardware_if.common.crtk import JOINT_NAMES
+from hardware_if.recording.recorder import read_recording
 from psm_control.errors import ConfigurationError
 from safety.force_watch import FORCE_LIMIT_EXCEEDED, FORCE_LIMIT_STALL
 

@@ -2,7 +2,7 @@
 
 :class:`PsmClient` subscribes to the arm's state and events and publishes its commands. It spins its
 own executor on a background thread, so :meth:`PsmClient.measure` and :meth:`PsmClient.servo_jp` are
-plain calls from the control loop, the same as on the simulation. A :class:`~hardware_if.deadman.Deadman`
+plain calls from the control loop, the same as on the simulation. A :class:`~hardware_if.client.deadman.Deadman`
 guards every motion command: on a stale measurement, a vanished publisher, an arm not ENABLED and homed,
 or a tracking error beyond the dVRK's tolerances, the client stops forwarding commands, holds by
 re-sending the arm's current set-point, logs the reason once, and reports it in :attr:`PsmClient.status`.
@@ -24,14 +24,14 @@ from rclpy.publisher import Publisher
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 from std_msgs.msg import String  # type: ignore[import-untyped]
 
-from hardware_if import convert
-from hardware_if.commander_watch import NAME_WAIT_S, UNNAMED, WATCH_PERIOD_S, CommanderWatch
-from hardware_if.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
-from hardware_if.deadman import ArmFacts, Deadman, DeadmanStatus
-from hardware_if.errors import DvrkError, DvrkTimeoutError
-from hardware_if.session import SpinThread
-from hardware_if.task_estimate import JawReading
-from hardware_if.wrench_calibration import WrenchCalibration
+from hardware_if.client.deadman import ArmFacts, Deadman, DeadmanStatus
+from hardware_if.client.task_estimate import JawReading
+from hardware_if.common import convert
+from hardware_if.common.commander_watch import NAME_WAIT_S, UNNAMED, WATCH_PERIOD_S, CommanderWatch
+from hardware_if.common.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
+from hardware_if.common.errors import DvrkError, DvrkTimeoutError
+from hardware_if.common.session import SpinThread
+from hardware_if.wrench.calibration import WrenchCalibration
 from psm_control.commands import JointCommand, MeasuredState
 from psm_control.errors import TissueRetractError
 from psm_control.robot import PsmModel
@@ -67,7 +67,7 @@ class PsmClient(Node):
             ``time.perf_counter`` [s], e.g. to record or time the stream.
         node_name: ROS node name; default ``<arm>_client``.
         listen_only: Create no command publishers at all (a dry run): the client only subscribes, and
-            every command method raises :class:`~hardware_if.errors.DvrkError`.
+            every command method raises :class:`~hardware_if.common.errors.DvrkError`.
         context: The rclpy context (default: the global one), e.g. one per ROS domain.
 
     Use as a context manager (or call :meth:`start` and :meth:`close`).
@@ -304,7 +304,8 @@ class PsmClient(Node):
         return conflict
 
     def watch_commanders(self, *own_nodes: str, sensed: tuple[str, ...] = ()) -> None:
-        """Watch the graph for other commanders, consoles and sources of the arm (:mod:`hardware_if.commander_watch`).
+        """Watch the graph for other commanders, consoles and sources of the arm
+        (:mod:`hardware_if.common.commander_watch`).
 
         From now on the deadman holds on one, every state command is refused while there is one, and
         :meth:`exclusive` reads the graph at once. ``own_nodes`` are this program's other nodes (fully

@@ -241,7 +241,7 @@ def _read_bag(path: Path, arm: str) -> JointLog:
 
 
 def _read_recording(path: Path) -> JointLog:
-    from hardware_if.recording import read_recording  # mcap: the deploy's own recording format
+    from hardware_if.recording.recorder import read_recording  # mcap: the deploy's own recording format
 
     rows = [payload for topic, _, payload in read_recording(path) if topic == "/deploy/measured"]
     if not rows:

@@ -4,12 +4,12 @@
 ``action_space``, ``config``, ``goal``, ``grasp_position()``, ``site_position()``, ``scene.grasp.holding``),
 so the simulation's scripted expert and trained checkpoints run unchanged against a dVRK. The arm's
 part comes from the arm's own topics (``measured_cp``, ``jaw/measured_js``, ``body/measured_cf`` via
-:class:`~hardware_if.psm_client.PsmClient`). The grasp site, the goal, the achieved goal and the grasped
+:class:`~hardware_if.client.psm_client.PsmClient`). The grasp site, the goal, the achieved goal and the grasped
 flag come from one of two task sources:
 
 - :class:`RegisteredSite`: a site the operator registered, a goal, and the jaw's own topics
-  (:mod:`hardware_if.task_estimate`); no perception stack needed;
-- :class:`TaskListener`: ``/<arm>/task/*`` (:data:`~hardware_if.sim_task.TASK_TOPICS`), which the
+  (:mod:`hardware_if.client.task_estimate`); no perception stack needed;
+- :class:`TaskListener`: ``/<arm>/task/*`` (:data:`~hardware_if.console.sim_task.TASK_TOPICS`), which the
   simulated dVRK publishes and a perception node would on a robot.
 """
 
@@ -27,13 +27,13 @@ from rclpy.node import Node
 from std_msgs.msg import Bool, Int64  # type: ignore[import-untyped]
 
 import sim.envs
-from hardware_if.crtk import periodic_qos
-from hardware_if.errors import DvrkTimeoutError
-from hardware_if.psm_client import PsmClient
-from hardware_if.registration import console_base_frame, grasp_point
-from hardware_if.session import SpinThread
-from hardware_if.sim_task import task_topic
-from hardware_if.task_estimate import TaskEstimate
+from hardware_if.client.psm_client import PsmClient
+from hardware_if.client.registration import console_base_frame, grasp_point
+from hardware_if.client.task_estimate import TaskEstimate
+from hardware_if.common.crtk import periodic_qos
+from hardware_if.common.errors import DvrkTimeoutError
+from hardware_if.common.session import SpinThread
+from hardware_if.console.sim_task import task_topic
 from psm_control.quaternion import quaternion_xyzw
 
 __all__ = ["RegisteredSite", "RemoteTask", "TaskListener"]

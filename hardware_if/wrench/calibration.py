@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from hardware_if.joint_logs import JointLog, JointLogError
+from hardware_if.wrench.joint_logs import JointLog, JointLogError
 from psm_control.effort_model import EffortRegressor, independent_columns
 from psm_control.errors import ConfigurationError, InputFileError
 from psm_control.inputs import check_regular_file

@@ -1,6 +1,6 @@
 """What moves behind the simulated dVRK: a pluggable arm model.
 
-The simulated console (:mod:`hardware_if.sim_dvrk`) owns the CRTK interface and the operating-state
+The simulated console (:mod:`hardware_if.console.sim_dvrk`) owns the CRTK interface and the operating-state
 machine; an :class:`ArmModel` owns the physics. :class:`KinematicArm` is the dVRK's own "KINEMATIC"
 simulation (measured = last commanded). A physics model (the PyBullet tissue scene) plugs in through
 the same protocol and also reports the tissue force for ``body/measured_cf``.

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from hardware_if.crtk import JOINT_NAMES
+from hardware_if.common.crtk import JOINT_NAMES
 
 __all__ = [
     "JAW_START_TOLERANCE_RAD",
@@ -136,7 +136,7 @@ def return_to_start(
     (``move_jp``, ``jaw/move_jp``) and wait until it is there.
 
     Args:
-        client: The arm (:class:`~hardware_if.psm_client.PsmClient`).
+        client: The arm (:class:`~hardware_if.client.psm_client.PsmClient`).
         start_q: The episode's start joints.
         timeout_s: How long the move may take [s].
         poll_s: How often the measured joints are compared with the start [s].

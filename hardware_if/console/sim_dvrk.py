@@ -22,7 +22,7 @@
 - Like the dVRK, Cartesian goals (``servo_cp``, ``move_cp``) are refused while the shaft is less than
   45 mm past the RCM, and motion commands are ignored with an error unless the arm is ENABLED and homed.
 - The PID tracking-error trip: when a measured joint (or the jaw) is further from its set-point than
-  the dVRK 2.4's tolerance (:data:`~hardware_if.crtk.TRACKING_TOLERANCE`) while the arm is servoed, the
+  the dVRK 2.4's tolerance (:data:`~hardware_if.common.crtk.TRACKING_TOLERANCE`) while the arm is servoed, the
   console stops, goes to FAULT and says which joint on ``error``; ``enable`` recovers, from where the
   arm is. (The kinematic arm always tracks; a physics model that lags or is blocked can trip it.)
 - Effort commands (``servo_jf``, ``jaw/servo_jf``, ``body/`` and ``spatial/servo_cf``) are served but not
@@ -34,7 +34,7 @@
   ``local/forward_kinematics`` (about the RCM) and ``inverse_kinematics`` (goal about the RCM, from the
   request's joints), with the dVRK's ``result``/``message`` conventions.
 
-The physics is an :class:`~hardware_if.arm_model.ArmModel`.
+The physics is an :class:`~hardware_if.console.arm_model.ArmModel`.
 """
 
 from __future__ import annotations
@@ -53,10 +53,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 from std_msgs.msg import Bool, Empty, Float64, Float64MultiArray, MultiArrayDimension, String  # type: ignore[import-untyped]
 
-from hardware_if import convert
-from hardware_if.arm_model import ArmModel, ArmSample, KinematicArm
-from hardware_if.console_guard import CommandSources, other_consoles
-from hardware_if.crtk import (
+from hardware_if.common import convert
+from hardware_if.common.crtk import (
     DEFAULT_ARM,
     DEFAULT_RATE_HZ,
     JAW_JOINT_NAME,
@@ -67,8 +65,10 @@ from hardware_if.crtk import (
     event_qos,
     periodic_qos,
 )
-from hardware_if.errors import DvrkError
-from hardware_if.motion import JointTrajectory, inverse_kinematics
+from hardware_if.common.errors import DvrkError
+from hardware_if.console.arm_model import ArmModel, ArmSample, KinematicArm
+from hardware_if.console.console_guard import CommandSources, other_consoles
+from hardware_if.console.motion import JointTrajectory, inverse_kinematics
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
 from sim.force_sensing import ForceSensor, console_force, sensing_params
@@ -104,7 +104,7 @@ class SimulatedPsm(Node):
             ``measured_cf`` computed from them (:mod:`sim.force_sensing`); default the ``dvrk`` model, the
             console's uncompensated estimate, so that a rehearsal meets the sensor the robot has.
         exclusive: Refuse to serve an arm that another console already serves on the domain (waits up to
-            :data:`~hardware_if.console_guard.CONSOLE_DISCOVERY_S` for discovery first).
+            :data:`~hardware_if.console.console_guard.CONSOLE_DISCOVERY_S` for discovery first).
 
     Raises:
         DvrkError: ``exclusive`` and another node already publishes the arm's ``measured_js``.

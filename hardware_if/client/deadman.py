@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hardware_if.crtk import JOINT_NAMES, TRACKING_TOLERANCE
+from hardware_if.common.crtk import JOINT_NAMES, TRACKING_TOLERANCE
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig
 
@@ -34,7 +34,7 @@ class ArmFacts(NamedTuple):
         setpoint_q: Latest ``setpoint_js`` joints (6,), or None.
         data_fault: The first malformed or non-finite message on a subscribed topic ("" if none).
         conflict: Another commander or console of the arm in the ROS graph ("" if none), as
-            :meth:`hardware_if.commander_watch.CommanderWatch.conflict` words it.
+            :meth:`hardware_if.common.commander_watch.CommanderWatch.conflict` words it.
     """
 
     now_s: float
