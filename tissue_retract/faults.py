@@ -519,7 +519,7 @@ class _Injector:
         from sensor_msgs.msg import Image  # the ros extra
 
         from hardware_if.common.crtk import periodic_qos
-        from hardware_if.console.endoscope_stream import camera_topics
+        from hardware_if.common.task_topics import camera_topics
 
         out = []
         for side in ("left", "right"):

@@ -3,7 +3,7 @@
 :class:`CameraSite` is a task source for :class:`~hardware_if.client.remote_task.RemoteTask`, like
 :class:`~hardware_if.client.remote_task.RegisteredSite`, with the camera in the operator's place. It subscribes
 to a stereo rig's ``/<rig>/{left,right}/image_raw`` and ``camera_info`` (the dVRK video pipeline's
-names, :mod:`hardware_if.console.endoscope_stream`). At each episode's start it waits for a stereo pair taken
+names, :mod:`hardware_if.common.task_topics`). At each episode's start it waits for a stereo pair taken
 after that moment (left and right with the same stamp), checks the camera info against the endoscope
 the estimator was trained for, estimates the sites, and registers the task's site; the goal is the
 task's nominal goal about it, the grasp the jaw's (:mod:`hardware_if.client.task_estimate`). No
@@ -33,7 +33,7 @@ from hardware_if.client.task_estimate import TaskEstimate
 from hardware_if.common.crtk import periodic_qos
 from hardware_if.common.errors import HoldError
 from hardware_if.common.session import SpinThread
-from hardware_if.console.endoscope_stream import DEFAULT_RIG, camera_topics
+from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
 from sim.endoscope import StereoFrame, look_at
 from sim.tissue import SITE_NAMES
 

@@ -9,7 +9,7 @@ flag come from one of two task sources:
 
 - :class:`RegisteredSite`: a site the operator registered, a goal, and the jaw's own topics
   (:mod:`hardware_if.client.task_estimate`); no perception stack needed;
-- :class:`TaskListener`: ``/<arm>/task/*`` (:data:`~hardware_if.console.sim_task.TASK_TOPICS`), which the
+- :class:`TaskListener`: ``/<arm>/task/*`` (:data:`~hardware_if.common.task_topics.TASK_TOPICS`), which the
   simulated dVRK publishes and a perception node would on a robot.
 """
 
@@ -33,7 +33,7 @@ from hardware_if.client.task_estimate import TaskEstimate
 from hardware_if.common.crtk import periodic_qos
 from hardware_if.common.errors import DvrkTimeoutError
 from hardware_if.common.session import SpinThread
-from hardware_if.console.sim_task import task_topic
+from hardware_if.common.task_topics import task_topic
 from psm_control.quaternion import quaternion_xyzw
 
 __all__ = ["RegisteredSite", "RemoteTask", "TaskListener"]

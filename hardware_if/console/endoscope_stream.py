@@ -31,20 +31,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["DEFAULT_RIG", "EndoscopeStream", "SceneState", "camera_topics", "serve"]
+from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
 
-#: The dVRK video pipeline's default stereo rig name (``dvrk_video``'s launch files).
-DEFAULT_RIG = "jhu_daVinci"
+__all__ = ["EndoscopeStream", "SceneState", "serve"]
+
 _APPEARANCE_STREAM = 36
-
-
-def camera_topics(rig: str) -> dict[str, str]:
-    """Topic names of a stereo rig: ``left_image``, ``right_image``, ``left_info``, ``right_info``."""
-    return {
-        f"{side}_{kind}": f"/{rig}/{side}/{name}"
-        for side in ("left", "right")
-        for kind, name in (("image", "image_raw"), ("info", "camera_info"))
-    }
 
 
 class SceneState(NamedTuple):

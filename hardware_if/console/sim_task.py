@@ -10,8 +10,8 @@ ignored), so the simulation's physics, grasp and tissue-force code run unchanged
 A policy also needs the grasp site, the goal and whether the jaw holds the tissue. On a real dVRK a
 perception node supplies them, or an operator's registration and the jaw
 (:mod:`hardware_if.client.task_estimate`). Here :class:`TaskTopics` publishes the simulation's ground truth on
-extra, simulation-only topics under ``/<arm>/task/`` (see :data:`TASK_TOPICS`); a ``blind`` arm serves no
-such topic and reports its jaw as a real one on tissue: stalled open on the held flap
+extra, simulation-only topics under ``/<arm>/task/`` (see :data:`~hardware_if.common.task_topics.TASK_TOPICS`);
+a ``blind`` arm serves no such topic and reports its jaw as a real one on tissue: stalled open on the held flap
 (:meth:`sim.grasp.GraspParams.measured_jaw`), with a squeezing effort. :class:`TruthLog` writes the ground
 truth to a file instead, to score a blind run.
 """
@@ -29,6 +29,7 @@ import numpy as np
 
 import sim.envs
 from hardware_if.common.crtk import periodic_qos
+from hardware_if.common.task_topics import task_topic
 from hardware_if.console.arm_model import ArmSample
 from hardware_if.console.endoscope_stream import EndoscopeStream, SceneState
 from hardware_if.console.motion import inverse_kinematics
@@ -43,7 +44,6 @@ __all__ = [
     "JAW_LEVER_M",
     "PLACEABLE_SITES",
     "TASK_PHYSICS_PERIOD_S",
-    "TASK_TOPICS",
     "SetpointFollower",
     "TaskArm",
     "TaskTopics",
@@ -63,22 +63,6 @@ REST_AFTER_STEPS = 120
 REST_MOTION_M = 1e-6
 #: Grasp-point error at which the jaws count as on a site [m].
 _PLACE_TOLERANCE_M = 1e-4
-#: Simulation-only topics under ``/<arm>/task/`` (a perception node's job on a real robot).
-TASK_TOPICS = {
-    "site": "geometry_msgs/PointStamped: the grasp site on the flap, in <arm>_base [m]",
-    "goal": "geometry_msgs/PointStamped: the desired goal (where the site must go), in <arm>_base [m]",
-    "achieved_goal": "geometry_msgs/PointStamped: the task's achieved goal, in <arm>_base [m]",
-    "grasped": "std_msgs/Bool: the jaw holds the flap",
-    "reset": "std_msgs/Int64 (subscribed): rebuild the scene with this seed (a new episode)",
-    "resets": "std_msgs/Int64: how many resets the scene has done (a client knows its reset took effect)",
-}
-
-
-def task_topic(arm: str, name: str) -> str:
-    """The fully qualified name of a simulation-only task topic, e.g. ``/PSM1/task/site``."""
-    if name not in TASK_TOPICS:
-        raise KeyError(f"unknown task topic {name!r}; one of {', '.join(TASK_TOPICS)}")
-    return f"/{arm}/task/{name}"
 
 
 class SetpointFollower:

@@ -56,7 +56,7 @@ from hardware_if.common.commander_watch import DISCOVERY_S, console_kind, served
 from hardware_if.common.errors import DvrkError, HoldError
 from hardware_if.common.gc_pauses import freeze_startup_heap
 from hardware_if.common.session import ros_session
-from hardware_if.console.endoscope_stream import DEFAULT_RIG, camera_topics
+from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
 from hardware_if.recording.checked_file import RecordingError
 from hardware_if.recording.recorder import Recorder
 from hardware_if.wrench.calibration import WrenchCalibration

@@ -25,7 +25,7 @@ from ros_process import start_sim_dvrk, stop, wait_until
 from sensor_msgs.msg import CameraInfo, Image  # type: ignore[import-untyped]
 
 from hardware_if.common.crtk import periodic_qos
-from hardware_if.console.endoscope_stream import DEFAULT_RIG, camera_topics
+from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
 from hardware_if.deploy.run import EXIT_HOLD
 from hardware_if.recording.replay import load_recording, summarize_recording
 from sim.endoscope import Endoscope

@@ -52,7 +52,7 @@ import time
 from pathlib import Path
 
 from hardware_if.client.registration import read_registration
-from hardware_if.console.endoscope_stream import DEFAULT_RIG
+from hardware_if.common.task_topics import DEFAULT_RIG
 from hardware_if.deploy.run import DeployOptions, deploy
 from hardware_if.wrench.calibration import read_calibration
 from policies.resolve import POLICY_NAMES

@@ -37,7 +37,8 @@ from hardware_if.common.executor import make_executor
 from hardware_if.common.gc_pauses import freeze_startup_heap
 from hardware_if.common.network import apply_local_ros_env, environment_domain_id
 from hardware_if.common.session import require_ros, ros_session
-from hardware_if.console.endoscope_stream import DEFAULT_RIG, EndoscopeStream, camera_topics
+from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
+from hardware_if.console.endoscope_stream import EndoscopeStream
 from hardware_if.console.sim_task import PLACEABLE_SITES, TaskArm, TaskTopics, TruthLog
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
