@@ -12,7 +12,12 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: Each path kept for user scripts -> the modules its names now come from.
 OLD_PATHS = {
-    "hardware_if.deploy": ("hardware_if.deploy.run",),
+    "hardware_if.deploy": (
+        "hardware_if.deploy.options",
+        "hardware_if.deploy.report",
+        "hardware_if.deploy.run",
+        "hardware_if.deploy.stopping",
+    ),
     "hardware_if.recording": ("hardware_if.recording.recorder",),
     "hardware_if.psm_client": ("hardware_if.client.psm_client",),
     "hardware_if.sim_dvrk": ("hardware_if.console.sim_dvrk",),

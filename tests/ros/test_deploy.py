@@ -27,7 +27,7 @@ from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 
 from hardware_if.client.psm_client import PsmClient
 from hardware_if.common.crtk import MOTION_TOPICS, ArmTopics, periodic_qos
-from hardware_if.deploy.run import EXIT_HOLD
+from hardware_if.deploy.report import EXIT_HOLD
 from hardware_if.recording.replay import load_recording, summarize_recording
 from tissue_retract.faults import GATE_VARIABLE, MARK
 

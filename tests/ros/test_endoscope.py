@@ -26,7 +26,7 @@ from sensor_msgs.msg import CameraInfo, Image  # type: ignore[import-untyped]
 
 from hardware_if.common.crtk import periodic_qos
 from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
-from hardware_if.deploy.run import EXIT_HOLD
+from hardware_if.deploy.report import EXIT_HOLD
 from hardware_if.recording.replay import load_recording, summarize_recording
 from sim.endoscope import Endoscope
 from tissue_retract.faults import GATE_VARIABLE, MARK

@@ -27,7 +27,7 @@ from hardware_if.client.psm_client import PsmClient
 from hardware_if.common import convert
 from hardware_if.common.crtk import JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.common.executor import make_executor
-from hardware_if.deploy.run import EXIT_HOLD
+from hardware_if.deploy.report import EXIT_HOLD
 from hardware_if.recording.replay import load_recording, summarize_recording
 from psm_control.robot import PsmModel
 from tissue_retract.faults import GATE_VARIABLE, MARK

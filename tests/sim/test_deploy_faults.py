@@ -10,7 +10,9 @@ import pytest
 
 import sim.envs
 from hardware_if.client.deadman import Deadman
-from hardware_if.deploy.run import EXIT_HOLD, DeployOptions, deploy
+from hardware_if.deploy.options import DeployOptions
+from hardware_if.deploy.report import EXIT_HOLD
+from hardware_if.deploy.run import deploy
 from hardware_if.recording.recorder import Recorder, read_recording
 from hardware_if.recording.replay import load_recording, summarize_recording
 from safety.config import SafetyConfig

@@ -22,7 +22,8 @@ from hypothesis import HealthCheck, assume, given, settings, target
 from hypothesis import strategies as st
 
 import sim.envs
-from hardware_if.deploy.run import DeployOptions, deploy
+from hardware_if.deploy.options import DeployOptions
+from hardware_if.deploy.run import deploy
 from hardware_if.recording.replay import load_recording, summarize_recording
 from policies.resolve import resolve_policy
 from safety.config import SafetyConfig

@@ -280,7 +280,7 @@ def run(args: argparse.Namespace) -> int:
     from hardware_if.common.commander_watch import console_kind, served_by
     from hardware_if.common.errors import DvrkError
     from hardware_if.common.session import ros_session
-    from hardware_if.deploy.run import STOP_SIGNALS, Interrupted
+    from hardware_if.deploy.stopping import STOP_SIGNALS, Interrupted
     from hardware_if.wrench.calibration import EXACT_SENSING, fit_calibration, prepare_log, unimproved
 
     config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)

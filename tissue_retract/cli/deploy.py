@@ -53,7 +53,8 @@ from pathlib import Path
 
 from hardware_if.client.registration import read_registration
 from hardware_if.common.task_topics import DEFAULT_RIG
-from hardware_if.deploy.run import DeployOptions, deploy
+from hardware_if.deploy.options import DeployOptions
+from hardware_if.deploy.run import deploy
 from hardware_if.wrench.calibration import read_calibration
 from policies.resolve import POLICY_NAMES
 from psm_control.errors import ConfigurationError

@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from hardware_if.client.psm_client import PsmClient
     from hardware_if.common.errors import DvrkError
     from hardware_if.common.session import ros_session
-    from hardware_if.deploy.run import STOP_SIGNALS, Interrupted
+    from hardware_if.deploy.stopping import STOP_SIGNALS, Interrupted
 
     def stop(signum: int, _frame: Any) -> None:
         raise Interrupted(signum)
