@@ -1,21 +1,21 @@
-"""The old path of :mod:`hardware_if.wrench.calibration`, kept for user scripts; the project imports from there."""
+"""The old path of :mod:`hardware_if.wrench.calibration` and :mod:`hardware_if.wrench.fit`, kept for user scripts.
 
-from hardware_if.wrench.calibration import (
+The project imports from those two modules.
+"""
+
+from hardware_if.wrench.calibration import EXACT_SENSING, MAX_FILE_BYTES, WrenchCalibration, read_calibration
+from hardware_if.wrench.fit import (
     CUTOFF_HZ,
     DEPTH_BINS_M,
-    EXACT_SENSING,
-    MAX_FILE_BYTES,
     MIN_IMPROVEMENT,
     RETRACTION_TIP_SPEED_M_S,
     SPEED_BINS_M_S,
     FreeSpaceError,
     PreparedLog,
-    WrenchCalibration,
     check_calibration,
     fit_calibration,
     inertia_allowance_n,
     prepare_log,
-    read_calibration,
     unimproved,
 )
 

@@ -9,12 +9,8 @@ import numpy as np
 import pytest
 from bags import write_bag
 
-from hardware_if.wrench.calibration import (
-    check_calibration,
-    fit_calibration,
-    prepare_log,
-    read_calibration,
-)
+from hardware_if.wrench.calibration import read_calibration
+from hardware_if.wrench.fit import check_calibration, fit_calibration, prepare_log
 from hardware_if.wrench.joint_logs import read_joint_log
 from psm_control.effort_model import EffortRegressor, independent_columns
 from tissue_retract.cli import main

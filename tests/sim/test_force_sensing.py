@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import sim.envs
-from hardware_if.wrench.calibration import PreparedLog, fit_calibration, prepare_log
+from hardware_if.wrench.fit import PreparedLog, fit_calibration, prepare_log
 from hardware_if.wrench.joint_logs import JointLog
 from policies.resolve import resolve_policy
 from psm_control.errors import UnknownVariantError

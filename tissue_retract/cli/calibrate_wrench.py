@@ -196,13 +196,8 @@ def _table(summary: dict[str, Any]) -> str:
 
 def _offline(args: argparse.Namespace) -> int:
     """Fit on logs or check a calibration on them; 0, or 1 with the reason."""
-    from hardware_if.wrench.calibration import (
-        check_calibration,
-        fit_calibration,
-        prepare_log,
-        read_calibration,
-        unimproved,
-    )
+    from hardware_if.wrench.calibration import read_calibration
+    from hardware_if.wrench.fit import check_calibration, fit_calibration, prepare_log, unimproved
     from hardware_if.wrench.joint_logs import read_joint_log
 
     def prepared(paths: list[str]) -> list[Any]:
@@ -281,7 +276,8 @@ def run(args: argparse.Namespace) -> int:
     from hardware_if.common.errors import DvrkError
     from hardware_if.common.session import ros_session
     from hardware_if.deploy.stopping import STOP_SIGNALS, Interrupted
-    from hardware_if.wrench.calibration import EXACT_SENSING, fit_calibration, prepare_log, unimproved
+    from hardware_if.wrench.calibration import EXACT_SENSING
+    from hardware_if.wrench.fit import fit_calibration, prepare_log, unimproved
 
     config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)
     chain = ControlChain(config)
