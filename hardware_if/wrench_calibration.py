@@ -1,6 +1,6 @@
-"""The old path of :mod:`hardware_if.wrench.calibration` and :mod:`hardware_if.wrench.fit`, kept for user scripts.
+"""The old path of the wrench calibration, kept for user scripts; the project imports from its room.
 
-The project imports from those two modules.
+Its names now live in :mod:`hardware_if.wrench.calibration` and :mod:`hardware_if.wrench.fit`.
 """
 
 from hardware_if.wrench.calibration import EXACT_SENSING, MAX_FILE_BYTES, WrenchCalibration, read_calibration

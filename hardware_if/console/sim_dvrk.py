@@ -10,11 +10,12 @@
   subscriber are computed and sent. The kinematic arm answers a ``servo_jp``/``servo_jr`` at once on
   ``measured_js`` and ``setpoint_js``; a tick after such an answer does not send those two again.
 - Events (transient-local): ``operating_state`` (on every change and every accepted ``move_*``, and
-  republished every :data:`OPERATING_STATE_REPUBLISH_S` for clients that subscribe without history),
+  republished every :data:`~hardware_if.console.console_arm.OPERATING_STATE_REPUBLISH_S` for clients that
+  subscribe without history),
   ``goal_reached``, ``trajectory_j/ratio``, ``error``, ``warning``, ``status``.
-- The operating state machine: ``enable``; ``home`` (enables, takes :data:`HOMING_SETTLE_S` plus a
-  trajectory to the home joints, ends homed; a no-op on an arm that is already homed and idle);
-  ``disable``; ``unhome``.
+- The operating state machine: ``enable``; ``home`` (enables, takes
+  :data:`~hardware_if.console.console_arm.HOMING_SETTLE_S` plus a trajectory to the home joints, ends
+  homed; a no-op on an arm that is already homed and idle); ``disable``; ``unhome``.
 - Motion: ``servo_jp``/``servo_jr``/``servo_cp`` at once; ``move_jp``/``move_jr``/``move_cp`` and
   ``jaw/move_jp`` by trajectories within the dVRK's limits scaled by ``trajectory_j/set_ratio``, with
   ``is_busy`` true from the command to the end of the last running trajectory; ``jaw/servo_jp``; jaw
@@ -34,7 +35,9 @@
   ``local/forward_kinematics`` (about the RCM) and ``inverse_kinematics`` (goal about the RCM, from the
   request's joints), with the dVRK's ``result``/``message`` conventions.
 
-The physics is an :class:`~hardware_if.console.arm_model.ArmModel`.
+The operating state machine, the set-points and the console's own motion are
+:class:`~hardware_if.console.console_arm.ConsoleArm`'s; the physics is an
+:class:`~hardware_if.console.arm_model.ArmModel`.
 """
 
 from __future__ import annotations
@@ -45,144 +48,32 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-from builtin_interfaces.msg import Time  # type: ignore[import-untyped]
-from crtk_msgs.msg import OperatingState, StringStamped  # type: ignore[import-untyped]
+from crtk_msgs.msg import StringStamped  # type: ignore[import-untyped]
 from crtk_msgs.srv import QueryForwardKinematics, QueryInverseKinematics  # type: ignore[import-untyped]
-from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped  # type: ignore[import-untyped]
-from rclpy.node import Node
+from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
-from std_msgs.msg import Bool, Empty, Float64, Float64MultiArray, MultiArrayDimension, String  # type: ignore[import-untyped]
+from std_msgs.msg import Bool, Empty, Float64  # type: ignore[import-untyped]
 
 from hardware_if.common import convert
-from hardware_if.common.crtk import (
-    DEFAULT_ARM,
-    DEFAULT_RATE_HZ,
-    JAW_JOINT_NAME,
-    JAW_TRACKING_TOLERANCE,
-    JOINT_NAMES,
-    TRACKING_TOLERANCE,
-    ArmTopics,
-    event_qos,
-    periodic_qos,
-)
-from hardware_if.common.errors import DvrkError
-from hardware_if.console.arm_model import ArmModel, ArmSample, KinematicArm
-from hardware_if.console.console_guard import CommandSources, other_consoles
+from hardware_if.common.crtk import JOINT_NAMES, periodic_qos
+from hardware_if.console.console_arm import ConsoleArm
+from hardware_if.console.console_guard import CommandSources
 from hardware_if.console.motion import JointTrajectory, inverse_kinematics
-from psm_control.errors import ConfigurationError
-from psm_control.robot import PsmModel
-from sim.force_sensing import ForceSensor, console_force, sensing_params
-from sim.scene_stream import SceneStream
 
-__all__ = ["HOMING_SETTLE_S", "OPERATING_STATE_REPUBLISH_S", "SimulatedPsm"]
+__all__ = ["SimulatedPsm"]
 
-#: Time a home takes before the arm starts moving to the home joints [s]: the console powers the arm and
-#: biases its encoders first. Real homing takes seconds; scripts that race it must wait on is_homed.
-HOMING_SETTLE_S = 1.0
-#: Period of the operating_state republication [s]. The dVRK's Python client subscribes without
-#: history, so a client started after the last change learns the state from this.
-OPERATING_STATE_REPUBLISH_S = 0.1
 #: Jaw goals further than this beyond the jaw's limits are clamped with a warning [rad].
 _JAW_CLAMP_WARN_RAD = 1e-3
 
 
-class SimulatedPsm(Node):
-    """One simulated PSM on its CRTK topics and services.
+class SimulatedPsm(ConsoleArm):
+    """One simulated PSM on its CRTK topics and services (the arguments are :class:`ConsoleArm`'s)."""
 
-    Args:
-        arm: Arm name / namespace.
-        rate_hz: Publishing rate of the periodic topics [Hz] (the dVRK's default is 100).
-        model: Kinematic model; default the Classic PSM with the 400006 needle driver.
-        arm_model: Physics; default :class:`KinematicArm`.
-        base_frame: 4x4 pose of the RCM in ``<arm>_base`` (``measured_cp = base_frame @ local``).
-        home_q: Joints homing moves to; default all zero, as the dVRK's PSM homing.
-        homing_settle_s: Time a home takes before the move to ``home_q`` starts [s].
-        scene: Where the arm (measured and set-point) and the task's markers are streamed as a 3-D scene
-            every tick (``sim-dvrk --live``); None streams nothing.
-        context: rclpy context of the node; default rclpy's default context.
-        sensor: What the console makes of the tissue force: the joint efforts on ``measured_js`` and the
-            ``measured_cf`` computed from them (:mod:`sim.force_sensing`); default the ``dvrk`` model, the
-            console's uncompensated estimate, so that a rehearsal meets the sensor the robot has.
-        exclusive: Refuse to serve an arm that another console already serves on the domain (waits up to
-            :data:`~hardware_if.console.console_guard.CONSOLE_DISCOVERY_S` for discovery first).
-
-    Raises:
-        DvrkError: ``exclusive`` and another node already publishes the arm's ``measured_js``.
-    """
-
-    def __init__(
-        self,
-        arm: str = DEFAULT_ARM,
-        *,
-        rate_hz: float = DEFAULT_RATE_HZ,
-        model: PsmModel | None = None,
-        arm_model: ArmModel | None = None,
-        base_frame: np.ndarray | None = None,
-        home_q: np.ndarray | None = None,
-        homing_settle_s: float = HOMING_SETTLE_S,
-        scene: SceneStream | None = None,
-        context: Any = None,
-        sensor: ForceSensor | None = None,
-        exclusive: bool = False,
-    ) -> None:
-        if not (np.isfinite(rate_hz) and 1.0 <= rate_hz <= 5000.0):
-            raise ConfigurationError("rate_hz", rate_hz, "a publishing rate in 1..5000 Hz")
-        if not (np.isfinite(homing_settle_s) and 0.0 <= homing_settle_s <= 60.0):
-            raise ConfigurationError("homing_settle_s", homing_settle_s, "a duration in 0..60 s")
-        self.topics = ArmTopics(arm)
-        super().__init__(f"{arm.lower()}_sim_dvrk", context=context)
-        if exclusive and (others := other_consoles(self, arm)):
-            self.destroy_node()
-            raise DvrkError(
-                f"/{arm} is already served on this ROS domain by {', '.join(others)}: one console per arm "
-                "(stop that one, or serve another --arm or --domain-id)"
-            )
-        self.period_s = 1.0 / rate_hz
-        self.homing_settle_s = float(homing_settle_s)
-        self.model = model if model is not None else PsmModel.from_variant()
-        self.arm_model: ArmModel = arm_model if arm_model is not None else KinematicArm()
-        self.configuration = self.model.configuration(np.zeros(6), base_frame=base_frame)
-        self._ik_configuration = self.configuration.copy()
-        self._fk_configuration = self.configuration.copy()
-        self.home_q = np.zeros(6) if home_q is None else self.model.check_joints(home_q, strict=True)
-        self.scene = scene
-        self.state = OperatingState(state="DISABLED", is_homed=False, is_busy=False)
-        self._state_stamp_ns = 0
-        self._state_published_s = float("-inf")
-        self._setpoint_q = np.zeros(6)
-        self._setpoint_jaw = 0.0
-        self._setpoint_effort = np.zeros(6)
-        self._trajectory: JointTrajectory | None = None
-        self._jaw_trajectory: JointTrajectory | None = None
-        self._homing = False
-        self._homing_moves_at_s: float | None = None
-        self._mode = "position"  # "position", "effort" or "free"
-        self.trajectory_ratio = 1.0
-        self.settings = {"use_gravity_compensation": True, "body/set_cf_orientation_absolute": False}
-        self._sample: ArmSample = self.arm_model.reset(self._setpoint_q, self._setpoint_jaw)
-        self.sensor = sensor if sensor is not None else ForceSensor(sensing_params("dvrk"))
-        self._sense(0.0)
-        self._last_tick_s = time.monotonic()
-        self._answered = False  # a servo command's measured_js and setpoint_js went out since the last tick
-
-        state, event = periodic_qos(), event_qos()
+    def _serve(self) -> None:
+        """Subscribe to the CRTK command topics and offer the kinematics services."""
+        state = periodic_qos()
         t = self.topics.topic
-        self._pub = {
-            name: self.create_publisher(JointState, t(name), state)
-            for name in ("measured_js", "setpoint_js", "jaw/measured_js", "jaw/setpoint_js")
-        }
-        for name in ("measured_cp", "setpoint_cp", "local/measured_cp", "local/setpoint_cp"):
-            self._pub[name] = self.create_publisher(PoseStamped, t(name), state)
-        for name in ("body/measured_cf", "spatial/measured_cf"):
-            self._pub[name] = self.create_publisher(WrenchStamped, t(name), state)
-        for name in ("measured_cv", "local/measured_cv"):
-            self._pub[name] = self.create_publisher(TwistStamped, t(name), state)
-        for name in ("body/jacobian", "spatial/jacobian"):
-            self._pub[name] = self.create_publisher(Float64MultiArray, t(name), state)
-        self._operating_state = self.create_publisher(OperatingState, t("operating_state"), event)
-        self._events = {name: self.create_publisher(String, t(name), event) for name in ("error", "warning", "status")}
-        self._goal_reached = self.create_publisher(Bool, t("goal_reached"), event)
-        self._ratio = self.create_publisher(Float64, t("trajectory_j/ratio"), event)
+        arm = self.topics.arm
         # Commands arrive volatile: a restarted console must not replay an old "home" from history.
         self.command_sources = CommandSources(self, arm, partial(self._event, "warning"))
         subscriptions: tuple[tuple[type, str, Callable[[Any], None]], ...] = (
@@ -211,99 +102,6 @@ class SimulatedPsm(Node):
         self.create_service(QueryForwardKinematics, t("forward_kinematics"), self._on_forward_kinematics)
         self.create_service(QueryForwardKinematics, t("local/forward_kinematics"), self._on_local_forward_kinematics)
         self.create_service(QueryInverseKinematics, t("inverse_kinematics"), self._on_inverse_kinematics)
-        self._publish_operating_state(changed=True)
-        self._ratio.publish(Float64(data=self.trajectory_ratio))
-        self.create_timer(self.period_s, self._tick)
-
-    def set_base_frame(self, transform_rcm_to_base: np.ndarray) -> None:
-        """Move the RCM in ``<arm>_base`` (as the dVRK's ``set_base_frame``; a task reset moves it)."""
-        for configuration in (self.configuration, self._ik_configuration, self._fk_configuration):
-            configuration.set_base_frame(transform_rcm_to_base)
-
-    def place_arm(self, q: np.ndarray, jaw: float) -> None:
-        """Put the arm (measured and set-point) at ``q`` and ``jaw``, as an operator moves a disabled arm by hand."""
-        self._setpoint_q = self.model.check_joints(q, strict=True).copy()
-        self._setpoint_jaw = float(jaw)
-        self._sample = self.arm_model.reset(self._setpoint_q, self._setpoint_jaw)
-
-    @property
-    def busy(self) -> bool:
-        """Whether homing or a trajectory (arm or jaw) is running."""
-        return self._homing or self._trajectory is not None or self._jaw_trajectory is not None
-
-    # -- state machine ----------------------------------------------------------------------------
-    def _on_state_command(self, message: StringStamped) -> None:
-        # A client that just connected may read the arm's state as soon as enable/home return (the dVRK's
-        # scripts do, and an idempotent home returns at once): send it now, before the operating state.
-        self._publish_state(joints=True)
-        command = message.string
-        if command == "enable":
-            if self.state.state == "FAULT":
-                # Recover from where the arm is, as the PID does when it is enabled again.
-                self._servo(self._sample.q, self._sample.jaw)
-            self._set_state("ENABLED")
-        elif command == "disable":
-            self._stop_motion()
-            self._homing, self._homing_moves_at_s = False, None
-            self._set_state("DISABLED", is_busy=False)
-        elif command == "home":
-            if self.state.state == "ENABLED" and self.state.is_homed and not self.busy:
-                # The console's home is idempotent: a homed arm stays where it is and keeps its goals.
-                self._event("status", f"{self.topics.arm}: already homed")
-                self._publish_operating_state(changed=True)
-                return
-            if self._homing:
-                return  # already homing: a repeated request neither restarts nor shortens it
-            self._stop_motion()
-            self._servo(self._sample.q, self._sample.jaw)  # homing starts from where the arm is
-            self._homing = True
-            self._homing_moves_at_s = time.monotonic() + self.homing_settle_s
-            self._mode = "position"
-            self._set_state("ENABLED", is_homed=False, is_busy=True)
-            self._event("status", f"{self.topics.arm}: homing")
-        elif command == "unhome":
-            self._set_state(self.state.state, is_homed=False)
-        else:
-            self._event("error", f"{self.topics.arm}: unknown state command {command!r}")
-
-    def _set_state(self, state: str, *, is_homed: bool | None = None, is_busy: bool | None = None) -> None:
-        self.state.state = state
-        if is_homed is not None:
-            self.state.is_homed = is_homed
-        if is_busy is not None:
-            self.state.is_busy = is_busy
-        self._publish_operating_state(changed=True)
-
-    def _publish_operating_state(self, *, changed: bool) -> None:
-        """Publish the operating state; ``changed`` gives it a new stamp, otherwise it is a republication.
-
-        A republication keeps the stamp of the last change: the dVRK's client takes a newer stamp for a new
-        event, and a move handle's ``is_busy()`` trusts any state stamped after its command, so re-stamping
-        an idle state could end a move the console has not started yet.
-        """
-        if changed:
-            now_ns = self.get_clock().now().nanoseconds
-            self._state_stamp_ns = max(now_ns, self._state_stamp_ns + 1)  # strictly increasing
-        sec, nanosec = divmod(self._state_stamp_ns, 1_000_000_000)
-        self.state.header.stamp = Time(sec=sec, nanosec=nanosec)
-        self._operating_state.publish(self.state)
-        self._state_published_s = time.monotonic()
-
-    def _event(self, kind: str, text: str) -> None:
-        self._events[kind].publish(String(data=text))
-        if kind == "status":
-            self.get_logger().info(text)
-        else:
-            self.get_logger().warning(text)
-
-    def _ready(self, what: str) -> bool:
-        if self.state.state == "ENABLED" and self.state.is_homed and not self._homing:
-            return True
-        self._event(
-            "error",
-            f"{self.topics.arm}: {what} ignored, arm not ready ({self.state.state}, homed={self.state.is_homed})",
-        )
-        return False
 
     # -- motion commands --------------------------------------------------------------------------
     def _joints(self, message: JointState, what: str, *, strict: bool) -> np.ndarray | None:
@@ -327,11 +125,6 @@ class SimulatedPsm(Node):
                 f"{self.topics.arm}: {what} {value:.4f} rad clamped to the jaw's limits [{lower:.4f}, {upper:.4f}] rad",
             )
         return clamped
-
-    def _enter_position_mode(self) -> None:
-        if self._mode != "position":
-            self._mode = "position"
-            self._setpoint_effort = np.zeros(6)
 
     def _on_servo_jp(self, message: JointState) -> None:
         if not self._ready("servo_jp"):
@@ -432,40 +225,6 @@ class SimulatedPsm(Node):
         q = self._cartesian_goal(message, "move_cp")
         if q is not None:
             self._start_move(q)
-
-    def _start_move(self, goal: np.ndarray) -> None:
-        self._enter_position_mode()
-        self._trajectory = self._plan(goal)
-        self._moving()
-
-    def _moving(self) -> None:
-        """A move_* was accepted: busy, with a new stamp even when a move was already running."""
-        self.state.is_busy = True
-        self._publish_operating_state(changed=True)
-
-    def _plan(self, goal: np.ndarray) -> JointTrajectory:
-        spec, ratio = self.model.spec, self.trajectory_ratio
-        return JointTrajectory(
-            self._setpoint_q, goal, spec.velocity_limit * ratio, spec.acceleration_limit * ratio, time.monotonic()
-        )
-
-    def _servo(self, q: np.ndarray, jaw: float) -> None:
-        self._setpoint_q = np.asarray(q, dtype=float).copy()
-        self._setpoint_jaw = float(jaw)
-        self.arm_model.command(self._setpoint_q, self._setpoint_jaw)
-
-    def _stop_motion(self) -> None:
-        self._trajectory, self._jaw_trajectory = None, None
-
-    def _end_trajectories(self, *, arm: bool, jaw: bool) -> None:
-        """Drop running trajectories (a servo command replaces them); report the end of busy."""
-        was_busy = self.busy
-        if arm:
-            self._trajectory = None
-        if jaw:
-            self._jaw_trajectory = None
-        if was_busy and not self.busy:
-            self._set_state(self.state.state, is_busy=False)
 
     def _on_hold(self, _message: Empty) -> None:
         if not self._ready("hold"):
@@ -577,209 +336,3 @@ class SimulatedPsm(Node):
         response.result = residual <= 1e-4
         response.message = "" if response.result else f"inverse kinematics failed (residual {residual * 1000:.2f} mm)"
         return response
-
-    # -- periodic publication ---------------------------------------------------------------------
-    def _tick(self) -> None:
-        now = time.monotonic()
-        dt = now - self._last_tick_s
-        self._last_tick_s = now
-        answered, self._answered = self._answered, False
-        if self._homing and self._homing_moves_at_s is not None and now >= self._homing_moves_at_s:
-            self._homing_moves_at_s = None
-            self._trajectory = self._plan(self.home_q)
-        was_busy = self.busy
-        if self._trajectory is not None:
-            q, _ = self._trajectory.sample(now)
-            self._servo(q, self._setpoint_jaw)
-            if self._trajectory.done(now):
-                self._trajectory = None
-        if self._jaw_trajectory is not None:
-            jaw, _ = self._jaw_trajectory.sample(now)
-            self._servo(self._setpoint_q, float(jaw[0]))
-            if self._jaw_trajectory.done(now):
-                self._jaw_trajectory = None
-        if self._homing and self._homing_moves_at_s is None and self._trajectory is None:
-            self._homing = False
-            self.state.is_homed = True
-            self._event("status", f"{self.topics.arm}: homed")
-        self._sample = self.arm_model.step(dt)
-        self._sense(dt)
-        if self._mode == "free":
-            self._servo(self._sample.q, self._sample.jaw)  # nothing holds the arm: the set-point follows it
-        # A servo command answered since the last tick already sent measured_js and setpoint_js: a stream
-        # of commands at the rate or faster is answered once per command, not once more per tick.
-        self._publish_state(joints=not answered)
-        if self.scene is not None:
-            self.scene.scene.base_frame = self.configuration.base_frame
-            markers = self.arm_model.scene_markers()
-            self.scene.tick(
-                time.time(),
-                self._sample.q,
-                self._sample.jaw,
-                commanded_q=self._setpoint_q,
-                commanded_jaw=self._setpoint_jaw,
-                **markers,
-            )
-        self._check_tracking()
-        if was_busy and not self.busy:
-            # After the state at the goal: a client that reads on "not busy" finds the goal already sent.
-            self._set_state(self.state.state, is_busy=False)
-            self._goal_reached.publish(Bool(data=True))
-        if now - self._state_published_s >= OPERATING_STATE_REPUBLISH_S:
-            self._publish_operating_state(changed=False)
-
-    def _check_tracking(self) -> None:
-        """The PID's tracking-error trip: measured vs set-point beyond the dVRK's tolerance -> FAULT."""
-        if self.state.state != "ENABLED" or self._mode != "position":
-            return
-        errors = np.append(np.abs(self._sample.q - self._setpoint_q), abs(self._sample.jaw - self._setpoint_jaw))
-        tolerances = np.append(TRACKING_TOLERANCE, JAW_TRACKING_TOLERANCE)
-        over = np.flatnonzero(errors > tolerances)
-        if over.size == 0:
-            return
-        k = int(over[0])
-        name, unit = (*JOINT_NAMES, JAW_JOINT_NAME)[k], "m" if k == 2 else "rad"
-        self._stop_motion()
-        self._homing, self._homing_moves_at_s = False, None
-        self._set_state("FAULT", is_busy=False)
-        self._event(
-            "error",
-            f"{self.topics.arm}: PID tracking error on joint {name!r}: |measured - setpoint| = {errors[k]:.4f} {unit}, "
-            f"tolerance {tolerances[k]:g} {unit}; arm in FAULT, send enable to recover",
-        )
-
-    def _stamp(self) -> float:
-        return float(self.get_clock().now().nanoseconds) * 1e-9
-
-    def _subscribed(self, name: str) -> bool:
-        """Whether any subscriber is matched on a state topic: a message for nobody is neither built nor sent.
-
-        At 1 kHz, building and publishing the 14 state topics took most of the console's time, and a client
-        typically reads half of them. A subscriber that connects gets the next period's message.
-        """
-        return bool(self._pub[name].get_subscription_count() > 0)
-
-    def _sense(self, dt_s: float) -> None:
-        """The console's efforts and force estimate for the arm's state now (once per tick)."""
-        sample = self._sample
-        self.configuration.update(sample.q, sample.jaw)
-        self._efforts = self.sensor.efforts(self.configuration, sample.qd, sample.force_n, dt_s)
-        self._sensed_force = console_force(self.configuration.base_jacobian(), self._efforts)
-
-    def _publish_state(self, *, joints: bool) -> None:
-        """One period's state topics; the arm's ``measured_js``/``setpoint_js`` only with ``joints``."""
-        stamp = self._stamp()
-        if joints:
-            self._publish_arm_joints(stamp)
-        self._publish_jaw(stamp)
-        self._publish_poses_and_force(stamp)
-
-    def _publish_arm_joints(self, stamp: float | None = None) -> None:
-        stamp, sample = self._stamp() if stamp is None else stamp, self._sample
-        if self._subscribed("measured_js"):
-            # Joint efforts: what the motors exert against the force on the tool (J^T f) and what the console
-            # does not model (self.sensor), plus a commanded effort in effort mode. measured_cf is computed
-            # from them the other way round, as the console does.
-            effort = self._efforts
-            if self._mode == "effort":
-                effort = effort + self._setpoint_effort
-            self._pub["measured_js"].publish(
-                convert.joint_state(JOINT_NAMES, sample.q, sample.qd, effort, stamp_s=stamp)
-            )
-        if self._subscribed("setpoint_js"):
-            self._pub["setpoint_js"].publish(
-                convert.joint_state(JOINT_NAMES, self._setpoint_q, effort=self._setpoint_effort, stamp_s=stamp)
-            )
-
-    def _publish_jaw(self, stamp: float) -> None:
-        sample = self._sample
-        if self._subscribed("jaw/measured_js"):
-            self._pub["jaw/measured_js"].publish(
-                convert.joint_state(
-                    (JAW_JOINT_NAME,), [sample.jaw], [sample.jaw_velocity], [sample.jaw_effort], stamp_s=stamp
-                )
-            )
-        if self._subscribed("jaw/setpoint_js"):
-            self._pub["jaw/setpoint_js"].publish(
-                convert.joint_state((JAW_JOINT_NAME,), [self._setpoint_jaw], stamp_s=stamp)
-            )
-
-    def _publish_poses_and_force(self, stamp: float) -> None:
-        sample = self._sample
-        base_id, local_id = self.topics.base_frame_id, self.topics.local_frame_id
-        wanted = {name for name in _MEASURED_TOPICS + _SETPOINT_TOPICS if self._subscribed(name)}
-        if wanted & set(_SETPOINT_TOPICS):
-            self.configuration.update(self._setpoint_q, sample.jaw)
-            self._publish_pose("setpoint", wanted, stamp)
-        if not wanted & set(_MEASURED_TOPICS):
-            return
-        self.configuration.update(sample.q, sample.jaw)
-        self._publish_pose("measured", wanted, stamp)
-        rotation = self.configuration.measured_pose()[:3, :3]
-        if "spatial/measured_cf" in wanted:
-            spatial = convert.wrench_stamped(self._sensed_force, frame_id=base_id, stamp_s=stamp)
-            self._pub["spatial/measured_cf"].publish(spatial)
-        if "body/measured_cf" in wanted:
-            tip_id = f"{self.topics.arm}_tip"
-            body = convert.wrench_stamped(rotation.T @ self._sensed_force, frame_id=tip_id, stamp_s=stamp)
-            self._pub["body/measured_cf"].publish(body)
-        if not wanted & {"spatial/jacobian", "body/jacobian", "measured_cv", "local/measured_cv"}:
-            return
-        local_jacobian = self.configuration.local_jacobian()
-        spatial_jacobian = self.configuration.base_jacobian()
-        if "spatial/jacobian" in wanted:
-            self._pub["spatial/jacobian"].publish(_matrix_message(spatial_jacobian))
-        if "body/jacobian" in wanted:
-            body_jacobian = np.vstack([rotation.T @ spatial_jacobian[:3], rotation.T @ spatial_jacobian[3:]])
-            self._pub["body/jacobian"].publish(_matrix_message(body_jacobian))
-        if "measured_cv" in wanted:
-            self._pub["measured_cv"].publish(_twist_stamped(spatial_jacobian @ sample.qd, base_id, stamp))
-        if "local/measured_cv" in wanted:
-            self._pub["local/measured_cv"].publish(_twist_stamped(local_jacobian @ sample.qd, local_id, stamp))
-
-    def _publish_pose(self, prefix: str, wanted: set[str], stamp: float) -> None:
-        """``<prefix>_cp`` and ``local/<prefix>_cp`` at the configuration's joints, those subscribed."""
-        if f"local/{prefix}_cp" in wanted:
-            local = convert.pose_stamped(self.configuration.local_pose(), self.topics.local_frame_id, stamp)
-            self._pub[f"local/{prefix}_cp"].publish(local)
-        if f"{prefix}_cp" in wanted:
-            pose = convert.pose_stamped(self.configuration.measured_pose(), self.topics.base_frame_id, stamp)
-            self._pub[f"{prefix}_cp"].publish(pose)
-
-
-#: State topics computed at the measured joints.
-_MEASURED_TOPICS = (
-    "measured_cp",
-    "local/measured_cp",
-    "body/measured_cf",
-    "spatial/measured_cf",
-    "body/jacobian",
-    "spatial/jacobian",
-    "measured_cv",
-    "local/measured_cv",
-)
-#: State topics computed at the set-point joints.
-_SETPOINT_TOPICS = ("setpoint_cp", "local/setpoint_cp")
-
-
-def _matrix_message(matrix: np.ndarray) -> Float64MultiArray:
-    """A row-major ``std_msgs/Float64MultiArray`` of a 2-D array, as the dVRK publishes its Jacobians."""
-    rows, columns = matrix.shape
-    message = Float64MultiArray()
-    message.layout.dim = [
-        MultiArrayDimension(label="rows", size=rows, stride=rows * columns),
-        MultiArrayDimension(label="columns", size=columns, stride=columns),
-    ]
-    message.data = [float(v) for v in matrix.ravel()]
-    return message
-
-
-def _twist_stamped(twist: np.ndarray, frame_id: str, stamp_s: float) -> TwistStamped:
-    """A ``geometry_msgs/TwistStamped`` from [linear (3); angular (3)]."""
-    message = TwistStamped()
-    message.header.stamp = convert.seconds_to_time(stamp_s)
-    message.header.frame_id = frame_id
-    linear, angular = message.twist.linear, message.twist.angular
-    linear.x, linear.y, linear.z = (float(v) for v in twist[:3])
-    angular.x, angular.y, angular.z = (float(v) for v in twist[3:])
-    return message

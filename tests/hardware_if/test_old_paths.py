@@ -20,7 +20,7 @@ OLD_PATHS = {
     ),
     "hardware_if.recording": ("hardware_if.recording.recorder",),
     "hardware_if.psm_client": ("hardware_if.client.psm_client",),
-    "hardware_if.sim_dvrk": ("hardware_if.console.sim_dvrk",),
+    "hardware_if.sim_dvrk": ("hardware_if.console.console_arm", "hardware_if.console.sim_dvrk"),
     "hardware_if.wrench_calibration": ("hardware_if.wrench.calibration", "hardware_if.wrench.fit"),
 }
 
