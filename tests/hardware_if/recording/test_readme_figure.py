@@ -10,7 +10,7 @@ from PIL import Image
 from hardware_if.recording.replay_figure import LAYOUT_KEY
 from tests.conftest import run_cli
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 FIGURE = ROOT / "docs" / "make-run.png"
 
 
