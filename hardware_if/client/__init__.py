@@ -11,5 +11,5 @@ simulated task (:mod:`~hardware_if.client.registered_env`, :mod:`~hardware_if.cl
 
 Imports: :mod:`hardware_if.common` and :mod:`hardware_if.wrench` (the force calibration the client applies).
 Never the console: a client meets a console only on ROS topics, so it drives a real dVRK as it drives the
-simulated one. Nor the recording or the deploy, which are built on it.
+simulated one. Nor the recording, which is read without an arm, nor the deploy, which is built on the client.
 """
