@@ -25,10 +25,10 @@ import rclpy
 from ros_process import start_sim_dvrk, stop
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 
-from hardware_if.crtk import MOTION_TOPICS, ArmTopics, periodic_qos
-from hardware_if.deploy import EXIT_HOLD
-from hardware_if.psm_client import PsmClient
-from hardware_if.replay import load_recording, summarize_recording
+from hardware_if.client.psm_client import PsmClient
+from hardware_if.common.crtk import MOTION_TOPICS, ArmTopics, periodic_qos
+from hardware_if.deploy.report import EXIT_HOLD
+from hardware_if.recording.replay import load_recording, summarize_recording
 from tissue_retract.faults import GATE_VARIABLE, MARK
 
 #: A seed whose Task I episode the scripted expert completes in the simulation.

@@ -14,8 +14,8 @@ import pytest
 import rclpy
 from ros_process import start_sim_dvrk, stop, wait_until
 
-from hardware_if.psm_client import PsmClient
-from hardware_if.wrench_calibration import WrenchCalibration, read_calibration
+from hardware_if.client.psm_client import PsmClient
+from hardware_if.wrench.calibration import WrenchCalibration, read_calibration
 from psm_control.effort_model import EffortRegressor
 
 
