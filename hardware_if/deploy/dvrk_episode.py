@@ -105,7 +105,7 @@ def dvrk_episode(
                         tracking.commanded(output.command.q, time.monotonic())
                     status = client.status
                     sent = not options.dry_run and not status.holding
-                    recorder.write("/deploy/measured", measured_payload(measured))
+                    recorder.write("/deploy/measured", measured_payload(measured, client.efforts()))
                     recorder.write("/deploy/command", command_payload(output, sent, predicted))
                     account(report, recorder, output)
                     report.commands_sent += int(sent)

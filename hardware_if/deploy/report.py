@@ -124,15 +124,19 @@ class DeployReport:
         return out
 
 
-def measured_payload(measured: MeasuredState) -> dict[str, Any]:
-    """A tick's ``/deploy/measured`` record."""
-    return {
+def measured_payload(measured: MeasuredState, effort: np.ndarray | None = None) -> dict[str, Any]:
+    """A tick's ``/deploy/measured`` record; a dVRK's with its joint efforts, so that a free-space deploy's
+    recording is a log ``calibrate-wrench --from`` fits on."""
+    payload = {
         "q": measured.q,
         "qd": measured.qd,
         "jaw": measured.jaw,
         "force_n": measured.force_n,
         "stamp_s": measured.stamp_s,
     }
+    if effort is not None:
+        payload["effort"] = effort
+    return payload
 
 
 def command_payload(output: ControlOutput, sent: bool, predicted_force_n: float | None = None) -> dict[str, Any]:

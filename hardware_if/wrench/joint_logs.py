@@ -248,6 +248,8 @@ def _read_recording(path: Path) -> JointLog:
         raise MissingTopicError(path, "a recording with /deploy/measured messages")
     if any("effort" not in row for row in rows):
         raise NoEffortsError(path, "measurements with efforts ('effort' in /deploy/measured); this recording has none")
+    # A tick that read the measurement the tick before read too repeats its stamp: it is the same sample.
+    rows = [row for k, row in enumerate(rows) if k == 0 or float(row["stamp_s"]) > float(rows[k - 1]["stamp_s"])]
     t_s = np.array([float(row["stamp_s"]) for row in rows])
     return _checked(
         JointLog(
@@ -262,13 +264,15 @@ def _read_recording(path: Path) -> JointLog:
 
 
 def _is_recording(path: Path) -> bool:
-    """An MCAP file written by this project's deploy (its channels are JSON), not by ``ros2 bag``."""
+    """An MCAP file written by this project's deploy (its library), not by ``ros2 bag`` (profile ``ros2``)."""
+    from mcap.reader import make_reader  # mcap: the recordings' own format
+
     try:
         with path.open("rb") as f:
-            head = f.read(1 << 16)
-    except OSError:
+            header = make_reader(f).get_header()
+    except Exception:  # not a readable MCAP header: the bag reader then names what is wrong
         return False
-    return b"/deploy/measured" in head
+    return header.library == "tissue-retract"
 
 
 def read_joint_log(path: str | Path, *, arm: str = "PSM1", rate_hz: float | None = None) -> JointLog:

@@ -40,7 +40,7 @@ from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
 from sim.sweep.stopping import handling
-from tissue_retract.cli._checks import float_in
+from tissue_retract.cli._checks import float_in, output_file
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
 __all__ = ["add_arguments", "run"]
@@ -87,6 +87,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--wait", type=float_in(0.0, 3600.0, open_low=True), default=10.0, help="seconds to wait for the arm"
+    )
+    parser.add_argument(
+        "--record",
+        metavar="BAG",
+        type=output_file("--record"),
+        default=None,
+        help="live: also keep both excitations as a rosbag2 bag (MCAP) of /ARM/measured_js, for --from",
     )
     add_console_arguments(parser, network_help="keep your ROS discovery settings instead of localhost-only")
 
@@ -269,6 +276,13 @@ def run(args: argparse.Namespace) -> int:
         print("tissue-retract calibrate-wrench: error: --out F.json is required", file=sys.stderr)
         return 1
     output = check_output_path(args.out, "--out")
+    if args.record is not None and args.record.exists():
+        print(
+            f"tissue-retract calibrate-wrench: error: --record={str(args.record)!r} is not allowed: expected a bag "
+            "folder that does not exist yet (ros2 bag record's -o)",
+            file=sys.stderr,
+        )
+        return 1
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
     from hardware_if.client.psm_client import PsmClient
@@ -276,6 +290,7 @@ def run(args: argparse.Namespace) -> int:
     from hardware_if.common.errors import DvrkError
     from hardware_if.common.session import ros_session
     from hardware_if.deploy.stopping import STOP_SIGNALS, Interrupted
+    from hardware_if.wrench.bag_writer import write_joint_bag
     from hardware_if.wrench.calibration import EXACT_SENSING
     from hardware_if.wrench.fit import fit_calibration, prepare_log, unimproved
 
@@ -317,6 +332,9 @@ def run(args: argparse.Namespace) -> int:
                 except (DvrkError, RuntimeError) as e:
                     print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
                     return 1
+            if args.record is not None:  # kept before the fit, which may refuse to write a calibration
+                write_joint_bag(args.record, args.arm, [fit, held_out], start_s=time.time())
+                print(f"excitation recorded to {args.record} (/{args.arm}/measured_js, both trajectories)")
             stage = "the fit"
             calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
     except Interrupted as e:

@@ -235,7 +235,12 @@ def run(args: argparse.Namespace) -> int:
     # Refused here, before anything connects, if it is not a model.
     announce(texture_warning(load_perception(args.perception), options.texture))
     if args.target == "dvrk":
-        bound = "its error_bound_n" if calibration is not None else "the dvrk model's error bound"
+        bound = (
+            "its error_bound_n"
+            if calibration is not None
+            else "the dvrk sensing model's error bound; a real PSM's free-space error is several times the "
+            "model's (tissue-retract bench sensing on its logs): on a robot, calibrate-wrench first"
+        )
         print(
             f"force sensing: {sensing_source}; the filter trusts the force to {sensing_error_n:.3g} N ({bound})",
             flush=True,

@@ -9,8 +9,10 @@ import pytest
 from bags import write_bag
 from rosbags.rosbag2 import StoragePlugin
 
+from hardware_if.wrench.bag_writer import write_joint_bag
 from hardware_if.wrench.joint_logs import (
     LND_COUPLING,
+    JointLog,
     LogLayoutError,
     MissingTopicError,
     NoEffortsError,
@@ -109,3 +111,16 @@ def test_the_wpi_layout_undoes_the_instrument_coupling(tmp_path: Path) -> None:
     power_motor = np.sum(rows[:, 18:21] * rows[:, 11:14], axis=1)
     power_joint = np.sum(joint_tau * (rows[:, 11:14] @ LND_COUPLING.T), axis=1)
     np.testing.assert_allclose(power_motor, power_joint)
+
+
+def test_a_written_joint_bag_reads_back_log_after_log(tmp_path: Path) -> None:
+    """write_joint_bag keeps every sample of each log, in order, under /ARM/measured_js, one second apart."""
+    q, qd, effort = _samples()
+    first = JointLog("a", "live", np.arange(len(q)) / 100.0, q, qd, effort)
+    second = JointLog("b", "live", np.arange(len(q)) / 100.0, q[::-1], qd[::-1], effort[::-1])
+    bag = write_joint_bag(tmp_path / "bag", "PSM2", [first, second], start_s=1000.0)
+    log = read_joint_log(bag, arm="PSM2")
+    np.testing.assert_allclose(log.q, np.concatenate([q, q[::-1]]))
+    np.testing.assert_allclose(log.effort, np.concatenate([effort, effort[::-1]]))
+    gap = log.t_s[len(q)] - log.t_s[len(q) - 1]
+    assert gap == pytest.approx(1.0, abs=1e-6)
