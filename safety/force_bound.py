@@ -168,5 +168,16 @@ def sensing_warning(config: SafetyConfig, sensing: str) -> str:
         f"from the grasp point's travel since the grasp instead, assuming the held tissue is no stiffer than "
         f"{bound.stiffness_bound_n_per_m:g} N/m and loads the jaws by at most {bound.held_load_bound_n:.2f} N "
         f"when grasped: a retraction stops after {1000 * bound.travel_allowed_m():.1f} mm of travel. "
-        "Calibrate the force sensing (tissue-retract calibrate-wrench) or raise the limit if the tissue allows it"
+        f"What you can change: {'; '.join(_remedies(sensing))}"
     )
+
+
+def _remedies(sensing: str) -> list[str]:
+    """What a user can change when the sensing cannot tell the limit, for :func:`sensing_warning`."""
+    calibrated = "calibrat" in sensing or sensing.endswith(".json")
+    return [
+        *([] if calibrated else ["calibrate the force sensing (tissue-retract calibrate-wrench)"]),
+        "declare a narrower tissue stiffness range where the tissue is known (the stiffness bound is 2.64 x the "
+        "stiffest declared Young's modulus times the thickness; a sweep's --vary stiffness=LOW:HIGHx)",
+        "or raise the limit if the tissue allows it",
+    ]

@@ -39,7 +39,7 @@ def test_help_on_a_terminal_is_plain_text(capsys: pytest.CaptureFixture[str], mo
         main(["deploy", "--help"])
     printed = capsys.readouterr().out
     assert ":mod:" not in printed and "``" not in printed
-    assert "hardware_if.task_estimate" in printed
+    assert "hardware_if.client.task_estimate" in printed
     description = printed.split("\n\n", 1)[1].split("\noptions:", 1)[0]  # between the usage and the options
     assert max(len(line) for line in description.splitlines()) <= 60
 

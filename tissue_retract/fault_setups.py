@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hardware_if.errors import DvrkTimeoutError
+from hardware_if.common.errors import DvrkTimeoutError
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
 
@@ -61,7 +61,7 @@ def move_arm_off_start(domain_id: int, guard_s: float, arm: str = "PSM1") -> np.
     import rclpy  # the ros extra
     from rclpy.context import Context
 
-    from hardware_if.psm_client import PsmClient
+    from hardware_if.client.psm_client import PsmClient
 
     moved = PsmModel.from_variant().home()
     moved[0] += MOVED_OFFSET_RAD
@@ -88,7 +88,7 @@ def wait_until_served(domain_id: int, guard_s: float, arm: str = "PSM1") -> None
     import rclpy  # the ros extra
     from rclpy.context import Context
 
-    from hardware_if.psm_client import PsmClient
+    from hardware_if.client.psm_client import PsmClient
 
     context = Context()
     rclpy.init(context=context, domain_id=domain_id)

@@ -35,9 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from hardware_if.executor import make_executor
-from hardware_if.network import local_ros_env
-from hardware_if.replay import load_recording, summarize_recording
+from hardware_if.common.executor import make_executor
+from hardware_if.common.network import local_ros_env
+from hardware_if.recording.replay import load_recording, summarize_recording
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
 from sim.expert import ScriptedExpert
@@ -481,8 +481,8 @@ class _Injector:
         from geometry_msgs.msg import PoseStamped, WrenchStamped  # type: ignore[import-untyped]
         from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 
-        from hardware_if import convert
-        from hardware_if.crtk import JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, periodic_qos
+        from hardware_if.common import convert
+        from hardware_if.common.crtk import JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, periodic_qos
 
         name = ArmTopics(self.arm).topic(topic)
         message: Any
@@ -505,8 +505,8 @@ class _Injector:
         """Publishers of 0 N on the arm's ``body/`` and ``spatial/measured_cf``, with their messages."""
         from geometry_msgs.msg import WrenchStamped  # the ros extra
 
-        from hardware_if import convert
-        from hardware_if.crtk import ArmTopics, periodic_qos
+        from hardware_if.common import convert
+        from hardware_if.common.crtk import ArmTopics, periodic_qos
 
         out = []
         for topic, frame in (("body/measured_cf", f"{self.arm}_tip"), ("spatial/measured_cf", f"{self.arm}_base")):
@@ -518,8 +518,8 @@ class _Injector:
         """Publishers of grey stereo pairs on the endoscope's image topics, with their messages."""
         from sensor_msgs.msg import Image  # the ros extra
 
-        from hardware_if.crtk import periodic_qos
-        from hardware_if.endoscope_stream import camera_topics
+        from hardware_if.common.crtk import periodic_qos
+        from hardware_if.common.task_topics import camera_topics
 
         out = []
         for side in ("left", "right"):
@@ -537,7 +537,7 @@ class _Injector:
         from geometry_msgs.msg import PoseStamped, WrenchStamped
         from sensor_msgs.msg import JointState
 
-        from hardware_if.crtk import ArmTopics, event_qos, periodic_qos
+        from hardware_if.common.crtk import ArmTopics, event_qos, periodic_qos
 
         t = ArmTopics(self.arm).topic
         for kind, names, qos in (
@@ -552,8 +552,8 @@ class _Injector:
 
     def moved_message(self) -> Any:
         """A ``servo_jp`` 0.25 rad off the task's start on yaw, as a teleoperation node left running sends."""
-        from hardware_if import convert
-        from hardware_if.crtk import JOINT_NAMES
+        from hardware_if.common import convert
+        from hardware_if.common.crtk import JOINT_NAMES
 
         q = PsmModel.from_variant().home()
         q[0] += MOVED_OFFSET_RAD
@@ -561,8 +561,8 @@ class _Injector:
 
     def tracking_message(self) -> Any:
         """A ``setpoint_js`` 1 rad from anywhere the arm can be on outer_yaw (beyond the 0.5 rad trip)."""
-        from hardware_if import convert
-        from hardware_if.crtk import JOINT_NAMES
+        from hardware_if.common import convert
+        from hardware_if.common.crtk import JOINT_NAMES
 
         return convert.joint_state(JOINT_NAMES, [3.0, 0.0, 0.1, 0.0, 0.0, 0.0])
 
@@ -760,7 +760,7 @@ def _calibration_file(action: str, workdir: Path) -> Path:
     """A calibration file a deploy must not trust: its force overflows (``calibration``: finite parameters,
     one of them 1e300, an effort offset), it is PSM2's (``other-arm``), it was fitted where the console
     reports the exact force (``exact-sensing``), or on a real dVRK (``other-console``)."""
-    from hardware_if.wrench_calibration import EXACT_SENSING, WrenchCalibration
+    from hardware_if.wrench.calibration import EXACT_SENSING, WrenchCalibration
     from psm_control.effort_model import EffortRegressor
 
     path = workdir / "wrench.json"

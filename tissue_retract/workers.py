@@ -11,7 +11,7 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
-from hardware_if.perceived_env import camera_task
+from hardware_if.client.perceived_env import camera_task
 from policies.resolve import resolve_policy
 from safety.config import SafetyConfig
 from safety.force_bound import sensing_warning

@@ -3,7 +3,8 @@
 - ``commands.md``: the command reference, each command's ``--help`` from the argument parsers of
   :mod:`tissue_retract.cli` (its marker line is replaced by the generated text).
 - ``api/<package>/<module>.md``: one page per module of the six packages, filled in by mkdocstrings
-  from the docstrings, listed under "Python API" in the navigation.
+  from the docstrings, listed under "Python API" in the navigation as the folders lie: a package's
+  modules, then a section per sub-package (``sim.envs``, ``hardware_if.console``, ...).
 - "More": every ``docs/*.md`` page that ``nav`` in ``mkdocs.yml`` does not list, so a page added to
   ``docs/`` shows in the site without editing anything else.
 """
@@ -47,8 +48,22 @@ def _api_path(module: str) -> str:
     return "api/" + module.replace(".", "/") + ".md"
 
 
+def _api_section(package: str, names: list[str]) -> list[dict[str, Any]]:
+    """The navigation of ``package``: its own page and its modules' pages, then a section per sub-package."""
+    depth = package.count(".") + 1
+    children = sorted({".".join(name.split(".")[: depth + 1]) for name in names if name.startswith(f"{package}.")})
+    pages = [{package: _api_path(package)}] if package in names else []
+    sections = []
+    for child in children:
+        if any(name.startswith(f"{child}.") for name in names):
+            sections.append({child: _api_section(child, names)})
+        else:
+            pages.append({child: _api_path(child)})
+    return pages + sections
+
+
 def _api_nav() -> list[dict[str, Any]]:
-    return [{package: [{module: _api_path(module)} for module in _modules(package)]} for package in PACKAGES]
+    return [{package: _api_section(package, _modules(package))} for package in PACKAGES]
 
 
 def _listed(nav: Any) -> set[str]:

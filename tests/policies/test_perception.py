@@ -144,7 +144,7 @@ def test_the_default_estimator_takes_the_pink_one_on_pink_flaps_and_the_any_colo
     """``--perception camera``: on the tasks' flaps the two shipped estimators agree and the pink one's site is
     taken; on a checkerboard flap the pink one misses by centimetres, and the any-colour one's is taken."""
     import sim.envs
-    from hardware_if.perceived_env import camera_task
+    from hardware_if.client.perceived_env import camera_task
     from sim.tissue import TissueParams
 
     env = camera_task(sim.envs.make("multisite", tissue=TissueParams(texture_path=texture)))

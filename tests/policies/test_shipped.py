@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 
 import sim.envs
-from hardware_if.perceived_env import camera_task
+from hardware_if.client.perceived_env import camera_task
 from policies.checkpoint import load_policy
 from policies.resolve import resolve_policy
 from policies.shipped import CAMERA, shipped_claim, shipped_policy_path, shipped_tasks

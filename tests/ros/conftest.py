@@ -12,7 +12,7 @@ import os
 
 from domains import worker_domain_id
 
-from hardware_if.network import apply_local_ros_env
+from hardware_if.common.network import apply_local_ros_env
 
 DOMAIN_ID = worker_domain_id()
 apply_local_ros_env(DOMAIN_ID)

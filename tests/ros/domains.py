@@ -14,14 +14,14 @@ from __future__ import annotations
 
 import os
 
-from hardware_if.network import run_domain_id
+from hardware_if.common.network import run_domain_id
 
 #: The worker's own domain, at the start of its block.
 OWN_OFFSET = 0
 #: Domains at the end of each block for the dVRK client's servers.
 CLIENT_SLOTS = 7
 
-#: Usable domain ids (1..100), as :func:`hardware_if.network.run_domain_id` draws them.
+#: Usable domain ids (1..100), as :func:`hardware_if.common.network.run_domain_id` draws them.
 DOMAINS = 100
 
 

@@ -16,7 +16,7 @@ import threading
 import time
 from pathlib import Path
 
-from hardware_if.network import local_ros_env
+from hardware_if.common.network import local_ros_env
 
 REPOSITORY = Path(__file__).resolve().parents[2]
 SCRIPTS_HERE = Path(__file__).resolve().parent

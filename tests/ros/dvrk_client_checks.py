@@ -22,7 +22,7 @@ import numpy as np
 import PyKDL  # type: ignore[import-not-found]
 from std_msgs.msg import String  # type: ignore[import-untyped]
 
-from hardware_if.motion import JointTrajectory
+from hardware_if.console.motion import JointTrajectory
 from psm_control.robot import PsmModel
 from tests.ros.rclpy_rate_race import close_the_race
 

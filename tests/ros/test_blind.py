@@ -19,7 +19,7 @@ import pytest
 import rclpy
 from ros_process import start_sim_dvrk, stop
 
-from hardware_if.recording import read_recording
+from hardware_if.recording.recorder import read_recording
 
 #: A Task I seed; the deploy uses the scripted expert, which here reads only the estimate.
 SEED = "2"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hardware_if.deadman import ArmFacts, Deadman
+from hardware_if.client.deadman import ArmFacts, Deadman
 from psm_control.errors import ConfigurationError
 
 Q = np.array([0.1, -0.1, 0.12, 0.0, 0.2, -0.2])

@@ -20,15 +20,17 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 import rclpy
 from ros_process import start_sim_dvrk, stop
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 
-from hardware_if.crtk import MOTION_TOPICS, ArmTopics, periodic_qos
-from hardware_if.deploy import EXIT_HOLD
-from hardware_if.psm_client import PsmClient
-from hardware_if.replay import load_recording, summarize_recording
+from hardware_if.client.psm_client import PsmClient
+from hardware_if.common.crtk import MOTION_TOPICS, ArmTopics, periodic_qos
+from hardware_if.deploy.report import EXIT_HOLD
+from hardware_if.recording.replay import load_recording, summarize_recording
+from hardware_if.wrench.joint_logs import read_joint_log
 from tissue_retract.faults import GATE_VARIABLE, MARK
 
 #: A seed whose Task I episode the scripted expert completes in the simulation.
@@ -224,3 +226,11 @@ def test_ctrl_c_stops_deploy_cleanly(sim: subprocess.Popen[str], ros_env: dict[s
     summary = summarize_recording(load_recording(record))
     assert "Ctrl-C" in summary.holds
     assert summary.commands_sent > 0  # it had commanded the arm before the signal
+
+
+def test_a_dvrk_deploys_recording_is_a_joint_log_with_efforts(lift_run: tuple[int, str, Path]) -> None:
+    """A deploy to a dVRK records each tick's joint efforts with its joints: calibrate-wrench --from reads it."""
+    _, _, record = lift_run
+    log = read_joint_log(record)
+    assert log.layout == "recording" and len(log.t_s) > 10
+    assert np.all(np.isfinite(log.effort)) and np.abs(log.effort).max() > 0.0  # sim-dvrk sends efforts

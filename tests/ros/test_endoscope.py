@@ -24,10 +24,10 @@ from rclpy.node import Node
 from ros_process import start_sim_dvrk, stop, wait_until
 from sensor_msgs.msg import CameraInfo, Image  # type: ignore[import-untyped]
 
-from hardware_if.crtk import periodic_qos
-from hardware_if.deploy import EXIT_HOLD
-from hardware_if.endoscope_stream import DEFAULT_RIG, camera_topics
-from hardware_if.replay import load_recording, summarize_recording
+from hardware_if.common.crtk import periodic_qos
+from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
+from hardware_if.deploy.report import EXIT_HOLD
+from hardware_if.recording.replay import load_recording, summarize_recording
 from sim.endoscope import Endoscope
 from tissue_retract.faults import GATE_VARIABLE, MARK
 

@@ -10,10 +10,10 @@ import rclpy
 from rclpy.node import Node
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 
-from hardware_if.convert import joint_state
-from hardware_if.crtk import JOINT_NAMES, ArmTopics, periodic_qos
-from hardware_if.executor import make_executor
-from hardware_if.psm_client import PsmClient
+from hardware_if.client.psm_client import PsmClient
+from hardware_if.common.convert import joint_state
+from hardware_if.common.crtk import JOINT_NAMES, ArmTopics, periodic_qos
+from hardware_if.common.executor import make_executor
 
 
 def test_events_executor_starts_where_stderr_has_no_descriptor() -> None:

@@ -23,12 +23,12 @@ from ros_process import start_sim_dvrk, stop, wait_until
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 from std_msgs.msg import String  # type: ignore[import-untyped]
 
-from hardware_if import convert
-from hardware_if.crtk import JOINT_NAMES, ArmTopics, event_qos, periodic_qos
-from hardware_if.deploy import EXIT_HOLD
-from hardware_if.executor import make_executor
-from hardware_if.psm_client import PsmClient
-from hardware_if.replay import load_recording, summarize_recording
+from hardware_if.client.psm_client import PsmClient
+from hardware_if.common import convert
+from hardware_if.common.crtk import JOINT_NAMES, ArmTopics, event_qos, periodic_qos
+from hardware_if.common.executor import make_executor
+from hardware_if.deploy.report import EXIT_HOLD
+from hardware_if.recording.replay import load_recording, summarize_recording
 from psm_control.robot import PsmModel
 from tissue_retract.faults import GATE_VARIABLE, MARK
 

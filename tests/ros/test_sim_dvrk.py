@@ -12,7 +12,7 @@ import rclpy
 from dvrk_client import start_sim
 from ros_process import SIM_BASE_XYZ, start_sim_dvrk, stop, wait_until
 
-from hardware_if.psm_client import PsmClient
+from hardware_if.client.psm_client import PsmClient
 from psm_control.commands import JointCommand
 from psm_control.robot import PsmModel
 

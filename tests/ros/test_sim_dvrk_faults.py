@@ -16,9 +16,9 @@ from ros_process import wait_until
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from hardware_if.arm_model import ArmSample, KinematicArm
-from hardware_if.crtk import JOINT_NAMES, ArmTopics, event_qos, periodic_qos
-from hardware_if.sim_dvrk import SimulatedPsm
+from hardware_if.common.crtk import JOINT_NAMES, ArmTopics, event_qos, periodic_qos
+from hardware_if.console.arm_model import ArmSample, KinematicArm
+from hardware_if.console.sim_dvrk import SimulatedPsm
 
 
 class BlockedInsertion(KinematicArm):

@@ -13,10 +13,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 
-from hardware_if.crtk import ArmTopics, periodic_qos
-from hardware_if.executor import make_executor
-from hardware_if.sim_dvrk import SimulatedPsm
-from hardware_if.sim_task import TaskArm, TaskTopics, task_topic
+from hardware_if.common.crtk import ArmTopics, periodic_qos
+from hardware_if.common.executor import make_executor
+from hardware_if.common.task_topics import task_topic
+from hardware_if.console.sim_dvrk import SimulatedPsm
+from hardware_if.console.sim_task import TaskArm, TaskTopics
 
 #: measured_js messages the client must receive while one reset runs (5 periods: the deadman's timeout).
 _DURING_RESET = 5

@@ -14,8 +14,9 @@ import pytest
 import rclpy
 from ros_process import start_sim_dvrk, stop, wait_until
 
-from hardware_if.psm_client import PsmClient
-from hardware_if.wrench_calibration import WrenchCalibration, read_calibration
+from hardware_if.client.psm_client import PsmClient
+from hardware_if.wrench.calibration import WrenchCalibration, read_calibration
+from hardware_if.wrench.joint_logs import read_joint_log
 from psm_control.effort_model import EffortRegressor
 
 
@@ -41,11 +42,13 @@ def homed_sim(ros_env: dict[str, str]) -> Iterator[subprocess.Popen[str]]:
 def test_calibrate_wrench_lowers_the_held_out_error_three_times(
     homed_sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path
 ) -> None:
-    """calibrate-wrench against sim-dvrk: the held-out free-space RMS error falls at least 3x, and the file reads."""
+    """calibrate-wrench against sim-dvrk: the held-out free-space RMS error falls at least 3x, the file reads, and
+    the excitation it recorded (--record) fits offline to the same figures."""
     out = tmp_path / "wrench.json"
+    bag = tmp_path / "excitation"
     command = [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--domain-id", ros_env["ROS_DOMAIN_ID"]]
     result = subprocess.run(
-        [*command, "--out", str(out), "--duration", "8", "--wait", "60"],
+        [*command, "--out", str(out), "--duration", "8", "--wait", "60", "--record", str(bag)],
         env=ros_env,
         capture_output=True,
         text=True,
@@ -62,6 +65,24 @@ def test_calibrate_wrench_lowers_the_held_out_error_three_times(
     assert "(fitted on PSM1 on sim-dvrk, measured_js)" in result.stdout, result.stdout
     assert calibration.rms_before_n == pytest.approx(before, abs=1e-3)
     assert 0.0 < calibration.error_bound_n < before
+    assert f"excitation recorded to {bag}" in result.stdout, result.stdout
+    # The bag holds both excitations one after the other: fitted offline with the second third held out.
+    log = read_joint_log(bag)
+    assert log.layout == "rosbag2" and len(log.t_s) >= 0.9 * calibration.samples * 2, (len(log.t_s), calibration)
+    offline = tmp_path / "offline.json"
+    refit = subprocess.run(
+        [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--from", str(bag), "--out", str(offline)],
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert refit.returncode == 0, refit.stdout + refit.stderr
+    assert (
+        read_calibration(offline, "PSM1", exact_console=True).rms_before_n
+        >= 3.0 * read_calibration(offline, "PSM1", exact_console=True).rms_after_n
+    )
 
 
 @pytest.mark.slow

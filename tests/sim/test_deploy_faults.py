@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 import sim.envs
-from hardware_if.deadman import Deadman
-from hardware_if.deploy import EXIT_HOLD, DeployOptions, deploy
-from hardware_if.recording import Recorder, read_recording
-from hardware_if.replay import load_recording, summarize_recording
+from hardware_if.client.deadman import Deadman
+from hardware_if.deploy.options import DeployOptions
+from hardware_if.deploy.report import EXIT_HOLD
+from hardware_if.deploy.run import deploy
+from hardware_if.recording.recorder import Recorder, read_recording
+from hardware_if.recording.replay import load_recording, summarize_recording
 from safety.config import SafetyConfig
 from sim.evaluation import FAILURE_CLASSES, run_episode, summarize
 

@@ -10,7 +10,7 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
-from hardware_if.recording import CHANNELS, read_recording
+from hardware_if.recording.recorder import CHANNELS, read_recording
 from psm_control.robot import PsmModel
 from sim.scene3d import COMMANDED_PREFIX, RCM_FRAME
 from sim.scene_stream import ARM_TOPIC, LOG_TOPIC, TASK_TOPIC, TRANSFORMS_TOPIC

@@ -22,8 +22,9 @@ from hypothesis import HealthCheck, assume, given, settings, target
 from hypothesis import strategies as st
 
 import sim.envs
-from hardware_if.deploy import DeployOptions, deploy
-from hardware_if.replay import load_recording, summarize_recording
+from hardware_if.deploy.options import DeployOptions
+from hardware_if.deploy.run import deploy
+from hardware_if.recording.replay import load_recording, summarize_recording
 from policies.resolve import resolve_policy
 from safety.config import SafetyConfig
 from safety.force_watch import STALL_SPEED_M_S

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import sim.envs
-from hardware_if.joint_logs import JointLog
-from hardware_if.wrench_calibration import PreparedLog, fit_calibration, prepare_log
+from hardware_if.wrench.fit import PreparedLog, fit_calibration, prepare_log
+from hardware_if.wrench.joint_logs import JointLog
 from policies.resolve import resolve_policy
 from psm_control.errors import UnknownVariantError
 from psm_control.robot import PsmModel

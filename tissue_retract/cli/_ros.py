@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from hardware_if.network import apply_local_ros_env, environment_domain_id
+from hardware_if.common.network import apply_local_ros_env, environment_domain_id
 from tissue_retract.cli._checks import float_in, int_in
 
 __all__ = ["add_console_arguments", "apply_console_arguments", "point_argument"]

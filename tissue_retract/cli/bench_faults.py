@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hardware_if.network import apply_local_ros_env, run_domain_id
+from hardware_if.common.network import apply_local_ros_env, run_domain_id
 from sim.strict_json import write_strict_json
 
 __all__ = ["add_arguments", "run"]

@@ -40,7 +40,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hardware_if.network import apply_local_ros_env, run_domain_id
+from hardware_if.common.network import apply_local_ros_env, run_domain_id
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success, wilson_interval
 from tissue_retract.cli._checks import int_in
@@ -102,8 +102,8 @@ class _TrueDistance(gym.Wrapper):
 def _in_process(task: str, mode: str, seeds: Sequence[int]) -> list[dict[str, Any]]:
     """The shipped policy in-process on ``seeds``, sensing as the console does."""
     import sim.envs
-    from hardware_if.perceived_env import PerceivedTask
-    from hardware_if.registered_env import RegisteredTask
+    from hardware_if.client.perceived_env import PerceivedTask
+    from hardware_if.client.registered_env import RegisteredTask
     from policies.perception import load_site_estimator
     from policies.resolve import resolve_policy
     from sim.evaluation import run_episode
@@ -207,7 +207,7 @@ def _episodes_from_truth(truth: list[dict[str, Any]], seeds: Sequence[int], thre
 
 def _episode_ends(record: Path) -> dict[int, dict[str, Any]]:
     """The deploy's ``episode_end`` events by seed (success and goal distance as the deploy judged them)."""
-    from hardware_if.recording import read_recording
+    from hardware_if.recording.recorder import read_recording
 
     if not record.is_file():
         return {}
@@ -220,7 +220,7 @@ def _episode_ends(record: Path) -> dict[int, dict[str, Any]]:
 
 def _timing(record: Path) -> dict[str, list[Any]]:
     """The policy step periods and the ``measured_js`` ages at each control tick of a deploy's recording [s]."""
-    from hardware_if.recording import read_recording
+    from hardware_if.recording.recorder import read_recording
 
     steps: list[float] = []
     ages: list[float] = []

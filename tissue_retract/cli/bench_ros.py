@@ -1,7 +1,7 @@
 """``tissue-retract bench ros``: the policy -> ``servo_jp`` -> simulated dVRK -> ``measured_js`` round trip.
 
 A ``sim-dvrk`` child process serves PSM1 on a loopback-only domain of this run's own; this process
-streams ``servo_jp`` through a :class:`~hardware_if.psm_client.PsmClient` (deadman included) at each
+streams ``servo_jp`` through a :class:`~hardware_if.client.psm_client.PsmClient` (deadman included) at each
 rate and times, for every command, its arrival back as a ``measured_js`` that carries it. Each command
 is tagged by a distinct roll angle. It prints p50/p99 latency and the commands never seen back (drops).
 """
@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from hardware_if.network import apply_local_ros_env, run_domain_id
-from hardware_if.session import ros_session
+from hardware_if.common.network import apply_local_ros_env, run_domain_id
+from hardware_if.common.session import ros_session
 from psm_control.commands import JointCommand
 from sim.strict_json import write_strict_json
 from tissue_retract.cli._checks import float_in
@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str, Any]:
-    from hardware_if.psm_client import PsmClient  # the ros extra: rclpy, after the ROS environment is set
+    from hardware_if.client.psm_client import PsmClient  # the ros extra: rclpy, after the ROS environment is set
 
     count = max(1, round(rate_hz * duration_s))
     sent = np.full(count, np.nan)

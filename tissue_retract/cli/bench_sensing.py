@@ -29,16 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from hardware_if.joint_logs import read_joint_log
-from hardware_if.wrench_calibration import (
+from hardware_if.wrench.calibration import read_calibration
+from hardware_if.wrench.fit import (
     DEPTH_BINS_M,
     SPEED_BINS_M_S,
     PreparedLog,
     check_calibration,
     fit_calibration,
     prepare_log,
-    read_calibration,
 )
+from hardware_if.wrench.joint_logs import read_joint_log
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
 from sim.force_sensing import ForceSensor, sensing_params

@@ -1,6 +1,6 @@
 """``tissue-retract calibrate-wrench``: fit the dVRK's force-sensing errors in free space, for ``deploy``.
 
-Offline, from logs (:mod:`hardware_if.joint_logs`: rosbag2 bags of ``/<ARM>/measured_js``, this project's
+Offline, from logs (:mod:`hardware_if.wrench.joint_logs`: rosbag2 bags of ``/<ARM>/measured_js``, this project's
 recordings, the public WPI and radiang CSV layouts)::
 
     tissue-retract calibrate-wrench --from A [B ...] [--held-out C] --out F.json
@@ -12,7 +12,7 @@ estimate and of the calibrated one on the logs, overall and by insertion depth a
 
 Live, with no tissue in the jaws, the arm is driven through two short excitation trajectories (Lissajous
 motions of the tool tip with a yaw swing, about where it starts, through the whole control chain: IK,
-safety filter, Ruckig, verifier). The first is fitted (:mod:`hardware_if.wrench_calibration`), the second
+safety filter, Ruckig, verifier). The first is fitted (:mod:`hardware_if.wrench.calibration`), the second
 held out: the command prints the free-space force error of the console's estimate and of the calibrated
 one on it (RMS and largest, N), and writes the calibration to ``--out`` for
 ``deploy --target dvrk --wrench-calibration F.json``. The arm must be ENABLED and homed (``deploy`` or the
@@ -40,7 +40,7 @@ from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
 from sim.sweep.stopping import handling
-from tissue_retract.cli._checks import float_in
+from tissue_retract.cli._checks import float_in, output_file
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
 __all__ = ["add_arguments", "run"]
@@ -57,7 +57,7 @@ _DEADMAN_S = 0.25
 _MAX_HOLDS = 20
 #: A new target for the chain every this many ticks (the policies' 10 Hz at the dVRK's 100 Hz).
 _TICKS_PER_TARGET = 10
-#: Log layouts (:mod:`hardware_if.joint_logs`) recorded on real PSMs: the public WPI and radiang logs.
+#: Log layouts (:mod:`hardware_if.wrench.joint_logs`) recorded on real PSMs: the public WPI and radiang logs.
 _REAL_PSM_LAYOUTS = {"wpi", "radiang"}
 
 
@@ -87,6 +87,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--wait", type=float_in(0.0, 3600.0, open_low=True), default=10.0, help="seconds to wait for the arm"
+    )
+    parser.add_argument(
+        "--record",
+        metavar="BAG",
+        type=output_file("--record"),
+        default=None,
+        help="live: also keep both excitations as a rosbag2 bag (MCAP) of /ARM/measured_js, for --from",
     )
     add_console_arguments(parser, network_help="keep your ROS discovery settings instead of localhost-only")
 
@@ -141,7 +148,7 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
 
 def _joint_log(samples: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]) -> Any:
     """The excitation's samples as a joint log (repeated stamps, a measurement read twice, dropped)."""
-    from hardware_if.joint_logs import JointLog
+    from hardware_if.wrench.joint_logs import JointLog
 
     kept = [s for i, s in enumerate(samples) if i == 0 or s[0] > samples[i - 1][0]]
     t_s = np.array([s[0] for s in kept])
@@ -160,7 +167,7 @@ def _to_start(client: Any, wait_s: float) -> None:
 
     A homed PSM rests with the tool at the RCM, where the chain refuses to work (the dVRK's 45 mm minimum).
     """
-    from hardware_if.arm_pose import return_to_start
+    from hardware_if.client.arm_pose import return_to_start
 
     reason = return_to_start(client, PsmModel().home(), wait_s)
     if reason:
@@ -196,14 +203,9 @@ def _table(summary: dict[str, Any]) -> str:
 
 def _offline(args: argparse.Namespace) -> int:
     """Fit on logs or check a calibration on them; 0, or 1 with the reason."""
-    from hardware_if.joint_logs import read_joint_log
-    from hardware_if.wrench_calibration import (
-        check_calibration,
-        fit_calibration,
-        prepare_log,
-        read_calibration,
-        unimproved,
-    )
+    from hardware_if.wrench.calibration import read_calibration
+    from hardware_if.wrench.fit import check_calibration, fit_calibration, prepare_log, unimproved
+    from hardware_if.wrench.joint_logs import read_joint_log
 
     def prepared(paths: list[str]) -> list[Any]:
         return [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in paths]
@@ -274,14 +276,23 @@ def run(args: argparse.Namespace) -> int:
         print("tissue-retract calibrate-wrench: error: --out F.json is required", file=sys.stderr)
         return 1
     output = check_output_path(args.out, "--out")
+    if args.record is not None and args.record.exists():
+        print(
+            f"tissue-retract calibrate-wrench: error: --record={str(args.record)!r} is not allowed: expected a bag "
+            "folder that does not exist yet (ros2 bag record's -o)",
+            file=sys.stderr,
+        )
+        return 1
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
-    from hardware_if.commander_watch import console_kind, served_by
-    from hardware_if.deploy import STOP_SIGNALS, Interrupted
-    from hardware_if.errors import DvrkError
-    from hardware_if.psm_client import PsmClient
-    from hardware_if.session import ros_session
-    from hardware_if.wrench_calibration import EXACT_SENSING, fit_calibration, prepare_log, unimproved
+    from hardware_if.client.psm_client import PsmClient
+    from hardware_if.common.commander_watch import console_kind, served_by
+    from hardware_if.common.errors import DvrkError
+    from hardware_if.common.session import ros_session
+    from hardware_if.deploy.stopping import STOP_SIGNALS, Interrupted
+    from hardware_if.wrench.bag_writer import write_joint_bag
+    from hardware_if.wrench.calibration import EXACT_SENSING
+    from hardware_if.wrench.fit import fit_calibration, prepare_log, unimproved
 
     config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)
     chain = ControlChain(config)
@@ -321,6 +332,9 @@ def run(args: argparse.Namespace) -> int:
                 except (DvrkError, RuntimeError) as e:
                     print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
                     return 1
+            if args.record is not None:  # kept before the fit, which may refuse to write a calibration
+                write_joint_bag(args.record, args.arm, [fit, held_out], start_s=time.time())
+                print(f"excitation recorded to {args.record} (/{args.arm}/measured_js, both trajectories)")
             stage = "the fit"
             calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
     except Interrupted as e:

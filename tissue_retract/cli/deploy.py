@@ -8,7 +8,7 @@ observation is assembled from ``measured_cp``, ``jaw/measured_js``, ``body/measu
 - ``--site X Y Z`` (or ``--registration FILE`` from ``tissue-retract register``): no perception needed. The
   site is where the operator registered it, the goal is ``--goal X Y Z`` or the task's nominal goal about
   the site, the grasp is sensed by the jaw stalling on tissue (``jaw/measured_js`` vs ``jaw/setpoint_js``),
-  and while grasped the site moves with the jaws (:mod:`hardware_if.task_estimate`). No task topic is read;
+  and while grasped the site moves with the jaws (:mod:`hardware_if.client.task_estimate`). No task topic is read;
   success is then an estimate (``sim-dvrk --blind --truth FILE`` scores it).
 - ``--task-topics`` (the default without ``--site``): ``/<arm>/task/{site,goal,achieved_goal,grasped}``,
   from a perception node, or from ``sim-dvrk`` without ``--blind``.
@@ -51,10 +51,11 @@ import sys
 import time
 from pathlib import Path
 
-from hardware_if.deploy import DeployOptions, deploy
-from hardware_if.endoscope_stream import DEFAULT_RIG
-from hardware_if.registration import read_registration
-from hardware_if.wrench_calibration import read_calibration
+from hardware_if.client.registration import read_registration
+from hardware_if.common.task_topics import DEFAULT_RIG
+from hardware_if.deploy.options import DeployOptions
+from hardware_if.deploy.run import deploy
+from hardware_if.wrench.calibration import read_calibration
 from policies.resolve import POLICY_NAMES
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
@@ -234,7 +235,12 @@ def run(args: argparse.Namespace) -> int:
     # Refused here, before anything connects, if it is not a model.
     announce(texture_warning(load_perception(args.perception), options.texture))
     if args.target == "dvrk":
-        bound = "its error_bound_n" if calibration is not None else "the dvrk model's error bound"
+        bound = (
+            "its error_bound_n"
+            if calibration is not None
+            else "the dvrk sensing model's error bound; a real PSM's free-space error is several times the "
+            "model's (tissue-retract bench sensing on its logs): on a robot, calibrate-wrench first"
+        )
         print(
             f"force sensing: {sensing_source}; the filter trusts the force to {sensing_error_n:.3g} N ({bound})",
             flush=True,

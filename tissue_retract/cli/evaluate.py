@@ -12,11 +12,11 @@ limits, for example ``force_limit_n``; ``--no-safety`` is the ablation without t
 ``--blind`` evaluates the policy as a robot with no perception stack runs it (``deploy --site``): its
 observation carries a site registered ``--registration-error-mm`` (default 2) from the true one in a random
 direction, the episode's goal, a grasp sensed by the jaw stalling on the flap and a site that moves with the
-jaws (:class:`hardware_if.registered_env.RegisteredTask`); success is still the true site's distance. The
+jaws (:class:`hardware_if.client.registered_env.RegisteredTask`); success is still the true site's distance. The
 scripted expert reads the simulation itself, so ``--blind`` is for checkpoints and ``module:callable``.
 
 ``--perception camera[:MODEL]`` is ``--blind`` with the site estimated from the endoscope's stereo images at
-each episode's start (:class:`hardware_if.perceived_env.PerceivedTask`); the summary gives the estimate's
+each episode's start (:class:`hardware_if.client.perceived_env.PerceivedTask`); the summary gives the estimate's
 error to the true site (``site_error_mm``: median, p95, max). ``--texture FILE.png`` puts an image on the
 flap.
 """
@@ -33,8 +33,8 @@ from rich.table import Table
 from rich.text import Text
 
 import sim.envs
-from hardware_if.perceived_env import PerceivedTask
-from hardware_if.registered_env import RegisteredTask
+from hardware_if.client.perceived_env import PerceivedTask
+from hardware_if.client.registered_env import RegisteredTask
 from policies.resolve import POLICY_NAMES, resolve_policy
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path

@@ -52,11 +52,11 @@ def run(args: argparse.Namespace) -> int:
     finally:
         env.close()
     # The ros extra, imported after the environment it reads is set.
-    from hardware_if.arm_pose import return_to_start
-    from hardware_if.deploy import STOP_SIGNALS, Interrupted
-    from hardware_if.errors import DvrkError
-    from hardware_if.psm_client import PsmClient
-    from hardware_if.session import ros_session
+    from hardware_if.client.arm_pose import return_to_start
+    from hardware_if.client.psm_client import PsmClient
+    from hardware_if.common.errors import DvrkError
+    from hardware_if.common.session import ros_session
+    from hardware_if.deploy.stopping import STOP_SIGNALS, Interrupted
 
     def stop(signum: int, _frame: Any) -> None:
         raise Interrupted(signum)

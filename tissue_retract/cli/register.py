@@ -4,7 +4,7 @@ Hold the closed jaws on the site (the arm in its clutch or free mode, or moved t
 run ``tissue-retract register --arm PSM1``: it listens to the arm (it commands nothing), averages the grasp
 point (midway along the jaws, by the arm's kinematics) over ``--samples`` measurements, refuses if the tool
 moved more than 1 mm meanwhile, the jaws are open or the site is outside the chain's workspace box, warns
-when it is far from the depth the tissue lies at (:mod:`hardware_if.registration_checks`), and prints
+when it is far from the depth the tissue lies at (:mod:`hardware_if.client.registration_checks`), and prints
 ``site: X Y Z`` in metres in ``<arm>_base``. ``--out FILE``
 also writes it as JSON for ``deploy --registration FILE``. Discovery stays on localhost unless
 ``--network`` is given, as for ``deploy``.
@@ -44,11 +44,11 @@ def run(args: argparse.Namespace) -> int:
     output = check_output_path(args.out, "--out") if args.out else None
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
-    from hardware_if.psm_client import PsmClient
-    from hardware_if.registration import RegistrationError, console_base_frame, register_site
-    from hardware_if.registration_checks import check_registration
-    from hardware_if.session import ros_session
-    from hardware_if.task_estimate import format_point
+    from hardware_if.client.psm_client import PsmClient
+    from hardware_if.client.registration import RegistrationError, console_base_frame, register_site
+    from hardware_if.client.registration_checks import check_registration
+    from hardware_if.client.task_estimate import format_point
+    from hardware_if.common.session import ros_session
 
     with ros_session(), PsmClient(args.arm, listen_only=True, node_name=f"{args.arm.lower()}_register") as client:
         print(f"{args.arm}: hold the closed jaws still on the site", flush=True)

@@ -2,7 +2,7 @@
 
 Prints the duration, the commands computed and sent, safety stops and deadman holds, the peak force, the
 largest tracking error per joint (with its unit) and each episode's result; ``--plot out.png`` draws a
-figure (:mod:`hardware_if.replay_figure`): each episode on its own clock with its boundary and result, the
+figure (:mod:`hardware_if.recording.replay_figure`): each episode on its own clock with its boundary and result, the
 force with the force limit, the jaw, the tool tip's tracking error [mm], and the safety filter's
 interventions, safety stops and holds, labelled. Needs no ROS.
 """
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import argparse
 
-from hardware_if.replay import load_recording, summarize_recording
-from hardware_if.replay_figure import plot_recording
+from hardware_if.recording.replay import load_recording, summarize_recording
+from hardware_if.recording.replay_figure import plot_recording
 
 __all__ = ["add_arguments", "run"]
 

@@ -32,13 +32,14 @@ import threading
 
 import numpy as np
 
-from hardware_if.endoscope_stream import DEFAULT_RIG, EndoscopeStream, camera_topics
-from hardware_if.executor import make_executor
-from hardware_if.gc_pauses import freeze_startup_heap
-from hardware_if.network import apply_local_ros_env, environment_domain_id
-from hardware_if.session import require_ros, ros_session
-from hardware_if.sim_task import PLACEABLE_SITES, TaskArm, TaskTopics, TruthLog
-from hardware_if.task_estimate import format_point
+from hardware_if.client.task_estimate import format_point
+from hardware_if.common.executor import make_executor
+from hardware_if.common.gc_pauses import freeze_startup_heap
+from hardware_if.common.network import apply_local_ros_env, environment_domain_id
+from hardware_if.common.session import require_ros, ros_session
+from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
+from hardware_if.console.endoscope_stream import EndoscopeStream
+from hardware_if.console.sim_task import PLACEABLE_SITES, TaskArm, TaskTopics, TruthLog
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
@@ -135,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     # The ros extra, imported after the environment it reads is set.
     from rclpy.executors import ExternalShutdownException
 
-    from hardware_if.sim_dvrk import SimulatedPsm
+    from hardware_if.console.sim_dvrk import SimulatedPsm
 
     texture = check_texture(args.texture) if args.texture is not None else None
     task = TaskArm(args.task, seed=args.seed, blind=args.blind, texture=texture) if args.task is not None else None
@@ -214,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
             stop = threading.Event()
             signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
             endoscope = task.endoscope if task is not None else None
-            while node.context.ok() and not stop.is_set():  # spin_once: see hardware_if.executor
+            while node.context.ok() and not stop.is_set():  # spin_once: see hardware_if.common.executor
                 executor.spin_once(timeout_sec=0.05)
                 if endoscope is not None and (ended := endoscope.ended()):  # killed: said once, the arm goes on
                     print(ended, flush=True)

@@ -13,7 +13,7 @@ defaults are the seed paper's; ``--set FIELD=VALUE`` overrides any field of
 ``--blind`` (Tasks I-III) trains on what a robot without perception observes (``evaluate --blind``,
 ``deploy --site``): a site registered up to ``--registration-error-mm`` from the true one, a jaw-sensed
 grasp and the estimated site, rewarded by the simulation's true distance to the goal (see
-:mod:`hardware_if.registered_env`). Demonstrations and the evaluations in ``eval.csv`` see the same.
+:mod:`hardware_if.client.registered_env`). Demonstrations and the evaluations in ``eval.csv`` see the same.
 
 ``--vary`` takes what ``robustness --vary`` takes, parsed by the same function
 (:func:`sim.robustness.parse_vary`): every episode, the expert's demonstrations and the evaluations
@@ -39,8 +39,8 @@ from typing import Any, NoReturn
 
 import gymnasium as gym
 
-from hardware_if.perceived_env import camera_task
-from hardware_if.registered_env import RegisteredTask
+from hardware_if.client.perceived_env import camera_task
+from hardware_if.client.registered_env import RegisteredTask
 from policies.budget import PREPARATION_SHARE
 from policies.config import TrainConfig
 from policies.recipe import DEFAULT_RECIPE, ROBUST_RECIPE, Recipe

@@ -1,0 +1,150 @@
+"""The client-side deadman: when to stop commanding a dVRK and hold.
+
+The dVRK has no timeout on servo commands: a servo_jp goal is held until replaced, so a client that
+stops thinking must not leave the arm chasing an old goal, and a client whose measurements stop must
+not keep sending new ones. :class:`Deadman` decides, from facts the client gathers (message ages,
+publisher counts, the operating state, measured vs setpoint joints), whether commanding is safe. It
+has no ROS in it, so each rule can be tested alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from hardware_if.common.crtk import JOINT_NAMES, TRACKING_TOLERANCE
+from psm_control.errors import ConfigurationError
+from safety.config import SafetyConfig
+
+__all__ = ["ArmFacts", "Deadman", "DeadmanStatus"]
+
+
+class ArmFacts(NamedTuple):
+    """What the client knows about the arm at one instant.
+
+    Attributes:
+        now_s: Client's monotonic clock [s].
+        measured_rx_s: When the latest ``measured_js`` arrived [s], None if never.
+        publishers: Number of publishers of ``measured_js`` seen in the ROS graph (-1 if unknown).
+        state: Latest ``operating_state.state`` ("" if never received).
+        is_homed: Latest ``operating_state.is_homed``.
+        measured_q: Latest measured joints (6,), or None.
+        setpoint_q: Latest ``setpoint_js`` joints (6,), or None.
+        data_fault: The first malformed or non-finite message on a subscribed topic ("" if none).
+        conflict: Another commander or console of the arm in the ROS graph ("" if none), as
+            :meth:`hardware_if.common.commander_watch.CommanderWatch.conflict` words it.
+    """
+
+    now_s: float
+    measured_rx_s: float | None
+    publishers: int
+    state: str
+    is_homed: bool
+    measured_q: np.ndarray | None
+    setpoint_q: np.ndarray | None
+    data_fault: str = ""
+    conflict: str = ""
+
+
+class DeadmanStatus(NamedTuple):
+    """The deadman's verdict, readable by the caller at any time.
+
+    Attributes:
+        ok: True when commands may be sent.
+        holding: True once a fault stopped commanding; stays True until :meth:`Deadman.release`.
+        reason: The first failed rule ("" when ok), e.g. ``"stale: measured_js 0.412 s old"``.
+        since_s: Client clock time [s] at which the current hold started (nan when not holding).
+    """
+
+    ok: bool
+    holding: bool
+    reason: str
+    since_s: float = float("nan")
+
+
+@dataclass
+class Deadman:
+    """Latching deadman over the dVRK's state, with the dVRK's own tracking tolerances.
+
+    Args:
+        timeout_s: Largest allowed age of the latest ``measured_js`` [s]; default the chain's
+            ``SafetyConfig.deadman_timeout_s`` (0.15 s, 15 periods of the dVRK's 100 Hz publication).
+        tracking_tolerance: Largest |measured - setpoint| per joint before tripping; default the dVRK's
+            (0.5 rad yaw/pitch, 0.05 m insertion, 0.6 rad roll and wrist).
+
+    Raises:
+        ConfigurationError: A non-positive timeout or a tolerance not of shape (6,) and positive.
+    """
+
+    timeout_s: float = SafetyConfig.deadman_timeout_s
+    tracking_tolerance: np.ndarray = field(default_factory=lambda: TRACKING_TOLERANCE.copy())
+    _hold_reason: str = field(default="", init=False)
+    _hold_since_s: float = field(default=float("nan"), init=False)
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.timeout_s) and self.timeout_s > 0.0):
+            raise ConfigurationError("timeout_s", self.timeout_s, "a finite number of seconds > 0")
+        tolerance = np.asarray(self.tracking_tolerance, dtype=float)
+        if tolerance.shape != (len(JOINT_NAMES),) or not np.all(tolerance > 0.0):
+            raise ConfigurationError("tracking_tolerance", self.tracking_tolerance, "6 positive numbers")
+        self.tracking_tolerance = tolerance
+
+    def check(self, facts: ArmFacts) -> str:
+        """The first rule the facts break, or "" when commanding is safe (no latching)."""
+        if facts.data_fault:
+            return facts.data_fault
+        if facts.conflict:
+            return facts.conflict
+        if facts.publishers == 0:
+            return "publisher gone: nobody publishes measured_js"
+        if facts.publishers > 1:
+            return f"publisher conflict: {facts.publishers} publishers of measured_js (one arm allowed)"
+        if facts.measured_rx_s is None or facts.measured_q is None:
+            return "no measurement: measured_js never received"
+        age = facts.now_s - facts.measured_rx_s
+        if age > self.timeout_s:
+            return f"stale: measured_js {age:.3f} s old (timeout {self.timeout_s:.3f} s)"
+        if facts.state != "ENABLED" or not facts.is_homed:
+            state = facts.state or "unknown"
+            return f"not ready: operating state {state}, {'homed' if facts.is_homed else 'not homed'}"
+        if facts.setpoint_q is not None:
+            error = np.abs(facts.measured_q - facts.setpoint_q)
+            over = np.flatnonzero(error > self.tracking_tolerance)
+            if over.size:
+                i = int(over[0])
+                return (
+                    f"tracking error: {JOINT_NAMES[i]} |measured - setpoint| = {error[i]:.4g} "
+                    f"> {self.tracking_tolerance[i]:.4g}"
+                )
+        return ""
+
+    def update(self, facts: ArmFacts) -> DeadmanStatus:
+        """Apply the rules; a failure latches a hold until :meth:`release`."""
+        reason = self.check(facts)
+        if reason and not self._hold_reason:
+            self._hold_reason = reason
+            self._hold_since_s = facts.now_s
+        if self._hold_reason:
+            return DeadmanStatus(False, True, self._hold_reason, self._hold_since_s)
+        return DeadmanStatus(True, False, "")
+
+    @property
+    def status(self) -> DeadmanStatus:
+        """The latched verdict without new facts."""
+        if self._hold_reason:
+            return DeadmanStatus(False, True, self._hold_reason, self._hold_since_s)
+        return DeadmanStatus(True, False, "")
+
+    def release(self, facts: ArmFacts) -> DeadmanStatus:
+        """Clear a hold if the facts now pass every rule; otherwise keep holding with the new reason."""
+        reason = self.check(facts)
+        if reason:
+            self._hold_reason = reason
+            if not np.isfinite(self._hold_since_s):
+                self._hold_since_s = facts.now_s
+            return self.status
+        self._hold_reason = ""
+        self._hold_since_s = float("nan")
+        return self.status

@@ -1,0 +1,96 @@
+"""What moves behind the simulated dVRK: a pluggable arm model.
+
+The simulated console (:mod:`hardware_if.console.sim_dvrk`) owns the CRTK interface and the operating-state
+machine; an :class:`ArmModel` owns the physics. :class:`KinematicArm` is the dVRK's own "KINEMATIC"
+simulation (measured = last commanded). A physics model (the PyBullet tissue scene) plugs in through
+the same protocol and also reports the tissue force for ``body/measured_cf``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+
+__all__ = ["ArmModel", "ArmSample", "KinematicArm"]
+
+
+class ArmSample(NamedTuple):
+    """The arm's state after a step.
+
+    Attributes:
+        q: Measured joints (6,), dVRK order.
+        qd: Measured joint velocities (6,).
+        jaw: Measured jaw angle [rad].
+        force_n: Force on the tool (3,) [N], in the base frame's axes.
+        jaw_velocity: Measured jaw velocity [rad/s].
+        jaw_effort: Jaw effort [N m] (negative: squeezing something between the jaws).
+    """
+
+    q: np.ndarray
+    qd: np.ndarray
+    jaw: float
+    force_n: np.ndarray
+    jaw_velocity: float = 0.0
+    jaw_effort: float = 0.0
+
+
+class ArmModel(Protocol):
+    """The physics behind the simulated console."""
+
+    #: True when a command is measured at once (the console then answers a servo without waiting a tick).
+    instantaneous: bool
+
+    def reset(self, q: np.ndarray, jaw: float) -> ArmSample:
+        """Place the arm at rest at ``q`` and return its state."""
+
+    def command(self, q: np.ndarray, jaw: float) -> None:
+        """Set the joint set-point the arm's servo loop tracks."""
+
+    def step(self, dt_s: float) -> ArmSample:
+        """Advance by ``dt_s`` [s] (0 to only read the state) and return the measured state."""
+
+    def scene_markers(self) -> dict[str, Any]:
+        """What the 3-D scene shows besides the arm (tissue, site, goal, grasp, force), in ``<arm>_base``."""
+
+
+class KinematicArm:
+    """The dVRK's "KINEMATIC" simulation: the measured joints are the last commanded ones.
+
+    Velocities are finite differences of successive set-points over the step.
+    """
+
+    instantaneous = True
+
+    def __init__(self) -> None:
+        self._q = np.zeros(6)
+        self._previous = np.zeros(6)
+        self._jaw = 0.0
+        self._qd = np.zeros(6)
+
+    def reset(self, q: np.ndarray, jaw: float) -> ArmSample:
+        """Place the arm at ``q``, at rest."""
+        self._q = np.asarray(q, dtype=float).copy()
+        self._previous = self._q.copy()
+        self._jaw = float(jaw)
+        self._qd = np.zeros(6)
+        return self._sample()
+
+    def command(self, q: np.ndarray, jaw: float) -> None:
+        """Move to ``q`` at once."""
+        self._q = np.asarray(q, dtype=float).copy()
+        self._jaw = float(jaw)
+
+    def step(self, dt_s: float) -> ArmSample:
+        """Report the last command; velocities over ``dt_s`` when it is positive."""
+        if dt_s > 0.0:
+            self._qd = (self._q - self._previous) / dt_s
+            self._previous = self._q.copy()
+        return self._sample()
+
+    def _sample(self) -> ArmSample:
+        return ArmSample(self._q.copy(), self._qd.copy(), self._jaw, np.zeros(3))
+
+    def scene_markers(self) -> dict[str, Any]:
+        """Nothing but the arm: there is no task scene."""
+        return {}

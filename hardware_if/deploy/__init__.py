@@ -1,0 +1,23 @@
+"""A policy deployed through the control chain, to the simulation or to a dVRK over ROS 2, and recorded.
+
+:func:`~hardware_if.deploy.run.deploy` runs the episodes (:mod:`~hardware_if.deploy.sim_target`,
+:mod:`~hardware_if.deploy.dvrk_target` and its :mod:`~hardware_if.deploy.dvrk_episode`) with what
+:class:`~hardware_if.deploy.options.DeployOptions` asks, the policy's steps checked
+(:mod:`~hardware_if.deploy.policy`), and says what happened in a
+:class:`~hardware_if.deploy.report.DeployReport`; a fault anywhere is a hold, a stop signal stops between
+two ticks (:mod:`~hardware_if.deploy.stopping`).
+
+Imports: :mod:`hardware_if.client` (the dVRK target), :mod:`hardware_if.recording`,
+:mod:`hardware_if.wrench` and :mod:`hardware_if.common`. Never the console: the simulation target runs the
+task in-process, and a rehearsal against ``sim-dvrk`` goes through the client as a deploy to a dVRK does.
+
+``hardware_if.deploy`` was one module before the rooms: its names are kept here for user scripts. The
+project imports them from the modules that define them.
+"""
+
+from hardware_if.deploy.options import DeployOptions
+from hardware_if.deploy.report import EXIT_HOLD, DeployReport
+from hardware_if.deploy.run import deploy
+from hardware_if.deploy.stopping import EXIT_INTERRUPTED, STOP_SIGNALS, Interrupted
+
+__all__ = ["EXIT_HOLD", "EXIT_INTERRUPTED", "STOP_SIGNALS", "DeployOptions", "DeployReport", "Interrupted", "deploy"]

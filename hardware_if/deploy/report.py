@@ -1,0 +1,198 @@
+"""What a deploy did: :class:`DeployReport`, and each tick, safety event and hold counted in it and recorded.
+
+Every count the report keeps goes to the recording too, as the tick's ``/deploy/measured`` and
+``/deploy/command`` or an ``/deploy/event`` (:mod:`hardware_if.recording.recorder`), so a replay finds
+what the report says.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import signal
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hardware_if.common.errors import HoldError
+from hardware_if.recording.recorder import Recorder
+from psm_control.commands import ControlOutput, MeasuredState
+from safety.config import SafetyConfig
+from safety.force_bound import sensing_warning
+from safety.force_watch import FORCE_LIMIT_STALL
+from sim.success_interval import describe_success
+
+__all__ = [
+    "EXIT_HOLD",
+    "DeployReport",
+    "account",
+    "account_excursions",
+    "command_payload",
+    "measured_payload",
+    "record_hold",
+    "warn_sensing",
+]
+
+#: Exit status of a deploy that stopped because the deadman held the arm.
+EXIT_HOLD = 4
+
+
+@dataclass
+class DeployReport:
+    """What a deploy did: per-episode results, commands, safety events, forces, and why it ended."""
+
+    target: str
+    dry_run: bool
+    record: Path
+    episodes: list[dict[str, Any]] = field(default_factory=list)
+    commands: int = 0
+    commands_sent: int = 0
+    safety_stops: int = 0
+    interventions: collections.Counter[str] = field(default_factory=collections.Counter)
+    peak_force_n: float = 0.0
+    predicted_peak_force_n: float = 0.0
+    fault: str = ""
+    interrupted: bool = False
+    signal: str = ""
+    holds: int = 0
+    invalid_actions: int = 0
+    force_limit_n: float = float("nan")
+    force_limit_exceeded: int = 0
+    force_over_limit_s: float = 0.0
+    force_limit_stalls: int = 0
+
+    @property
+    def exit_code(self) -> int:
+        """0 when every episode ran to its end, :data:`EXIT_HOLD` on a hold, 128 + signal on a stop signal."""
+        if self.interrupted:
+            return 128 + int(signal.Signals[self.signal or "SIGINT"])
+        return EXIT_HOLD if self.fault else 0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (the recording's ``/deploy/report``)."""
+        data = dataclasses.asdict(self)
+        data["record"] = str(self.record)
+        data["interventions"] = dict(self.interventions)
+        data["success_rate"] = float(np.mean([e["success"] for e in self.episodes])) if self.episodes else float("nan")
+        return data
+
+    def lines(self) -> list[str]:
+        """The human report."""
+        kind = "dry run (nothing published on motion topics)" if self.dry_run else "deploy"
+        out = [f"{kind} to {self.target}: {len(self.episodes)} episode(s), recorded to {self.record}"]
+        for e in self.episodes:
+            out.append(
+                f"  episode {e['episode']} seed {e['seed']}: {'success' if e['success'] else 'no success'}, "
+                f"{e['steps']} steps, peak force {e['peak_force_n']:.3f} N"
+                + (f", goal distance {1000 * e['goal_distance_m']:.1f} mm" if "goal_distance_m" in e else "")
+            )
+        if self.episodes and not self.dry_run:
+            successes = sum(bool(e["success"]) for e in self.episodes)
+            out.append(f"  success: {describe_success(successes, len(self.episodes))}")
+        verb = "would have sent" if self.dry_run else "sent"
+        out.append(
+            f"  commands: {self.commands} computed, {verb} {self.commands_sent if not self.dry_run else self.commands}"
+        )
+        top = ", ".join(f"{k} x{v}" for k, v in self.interventions.most_common()) or "none"
+        out.append(f"  safety: {self.safety_stops} stop tick(s); interventions: {top}")
+        out.append(f"  holds: {self.holds}; invalid actions: {self.invalid_actions}")
+        out.append(f"  peak measured force {self.peak_force_n:.3f} N")
+        if self.force_limit_exceeded:
+            out.append(
+                f"  FORCE LIMIT {self.force_limit_n:g} N EXCEEDED {self.force_limit_exceeded} x, "
+                f"{self.force_over_limit_s:.2f} s in all (events force_limit_exceeded in the recording)"
+            )
+        elif self.episodes:
+            out.append(f"  force limit {self.force_limit_n:g} N: never exceeded")
+        else:
+            out.append(f"  force limit {self.force_limit_n:g} N: no episode ran")
+        if self.force_limit_stalls:
+            out.append(
+                f"  the force limit stalled the retraction in {self.force_limit_stalls} episode(s) "
+                "(force_limit_stall events in the recording; the warnings above say what holding the tissue cost)"
+            )
+        if self.dry_run:
+            out.append(f"  predicted peak force {self.predicted_peak_force_n:.3f} N")
+        if self.fault:
+            out.append(f"  HOLD: {self.fault}")
+        if self.interrupted:
+            name = "Ctrl-C" if self.signal in ("", "SIGINT") else self.signal
+            out.append(f"  interrupted ({name}): stopped commanding between two ticks")
+        return out
+
+
+def measured_payload(measured: MeasuredState, effort: np.ndarray | None = None) -> dict[str, Any]:
+    """A tick's ``/deploy/measured`` record; a dVRK's with its joint efforts, so that a free-space deploy's
+    recording is a log ``calibrate-wrench --from`` fits on."""
+    payload = {
+        "q": measured.q,
+        "qd": measured.qd,
+        "jaw": measured.jaw,
+        "force_n": measured.force_n,
+        "stamp_s": measured.stamp_s,
+    }
+    if effort is not None:
+        payload["effort"] = effort
+    return payload
+
+
+def command_payload(output: ControlOutput, sent: bool, predicted_force_n: float | None = None) -> dict[str, Any]:
+    """A tick's ``/deploy/command`` record: the chain's command, whether it was sent, and why it was changed."""
+    command = output.command
+    payload = {
+        "q": command.q,
+        "qd": command.qd,
+        "jaw": command.jaw,
+        "stamp_s": command.stamp_s,
+        "sent": sent,
+        "safety_stop": output.safety_stop,
+        "reason": output.reason,
+        "interventions": list(output.interventions),
+    }
+    if predicted_force_n is not None:
+        payload["predicted_force_n"] = predicted_force_n
+    return payload
+
+
+def account(report: DeployReport, recorder: Recorder, output: ControlOutput) -> None:
+    """Count a tick's command, safety stop and interventions; record, say and count the chain's warnings."""
+    report.commands += 1
+    report.interventions.update(output.interventions)
+    if output.safety_stop:
+        report.safety_stops += 1
+        recorder.write("/deploy/event", {"kind": "safety_stop", "text": output.reason})
+    for event in output.events:  # the chain's warnings: said at once, kept in the recording, counted
+        recorder.write("/deploy/event", {**event, "episode": len(report.episodes)})
+        print(f"WARNING: {event['text']}", file=sys.stderr, flush=True)
+        report.force_limit_stalls += event["kind"] == FORCE_LIMIT_STALL
+
+
+def account_excursions(
+    report: DeployReport, recorder: Recorder, excursions: list[dict[str, Any]], episode: int
+) -> None:
+    """Record each ``force_limit_exceeded`` event of an episode and count it in the report."""
+    for event in excursions:
+        recorder.write("/deploy/event", {**event, "episode": episode})
+        report.force_limit_exceeded += 1
+        report.force_over_limit_s += float(event["duration_s"])
+
+
+def record_hold(report: DeployReport, recorder: Recorder, fault: HoldError) -> None:
+    """Record a hold (once): the reason in the report (exit 4) and the event with its data in the recording."""
+    if fault.recorded:
+        return
+    fault.recorded = True
+    report.fault = str(fault)
+    report.holds += 1
+    recorder.write("/deploy/event", {"kind": "hold", "text": str(fault), "fault": fault.kind, "data": fault.data})
+
+
+def warn_sensing(config: SafetyConfig, source: str, recorder: Recorder, echo: Any) -> None:
+    """Tell the user, and the recording, when the force limit is below what the sensing resolves."""
+    warning = sensing_warning(config, source)
+    if warning:
+        echo(warning)
+        recorder.write("/deploy/event", {"kind": "force_sensing_warning", "text": warning})

@@ -1,0 +1,212 @@
+"""A fitted calibration of the dVRK's force sensing, and its file: what a deploy takes the force with.
+
+:class:`WrenchCalibration` holds the parameters of the arm's own efforts (gravity, inertia, friction,
+offsets) that :mod:`hardware_if.wrench.fit` identified on free-space logs, and the error bounds the fit
+checked; the client removes those efforts from the console's joint efforts and computes the force from
+what is left. :func:`read_calibration` refuses a file that is not one, not self-consistent, or not for
+the arm and console it is used with.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psm_control.effort_model import EffortRegressor
+from psm_control.errors import ConfigurationError, InputFileError
+from psm_control.inputs import check_regular_file
+from psm_control.robot import PsmConfiguration
+from safety.config import SafetyConfig
+from sim.force_sensing import console_force
+
+__all__ = ["EXACT_SENSING", "MAX_FILE_BYTES", "WrenchCalibration", "effort_regressor", "read_calibration"]
+
+#: Largest calibration file read [bytes] (1 MiB): one holds a few hundred numbers, a few kilobytes.
+MAX_FILE_BYTES = 1024 * 1024
+#: ``sensing`` of a calibration fitted where the console's free-space efforts were all zero: a console that
+#: reports the exact force (``sim-dvrk --wrench ideal``), or one that sends no efforts.
+EXACT_SENSING = "ideal"
+
+_REGRESSOR: EffortRegressor | None = None
+
+
+def effort_regressor() -> EffortRegressor:
+    """The effort regressor the calibrations are fitted and applied with (one for the whole process)."""
+    global _REGRESSOR  # one Pinocchio model and data for every calibration of the process
+    if _REGRESSOR is None:
+        _REGRESSOR = EffortRegressor()
+    return _REGRESSOR
+
+
+@dataclass(frozen=True)
+class WrenchCalibration:
+    """A fitted force-sensing calibration (the JSON file ``calibrate-wrench`` writes).
+
+    Attributes:
+        arm: The arm it was fitted on.
+        columns: The regressor's columns it identified (:class:`~psm_control.effort_model.EffortRegressor`).
+        parameters: Their values.
+        error_bound_n: What the calibrated force may still be off by without an acceleration (a deploy's) [N]:
+            1.25 x (the largest held-out free-space error at retraction speeds + the inertia allowance).
+        error_bound_with_acceleration_n: ... with the acceleration known [N]: 1.25 x the largest held-out
+            free-space error at retraction speeds.
+        rms_before_n: Held-out free-space force error of the console's estimate, RMS [N].
+        max_before_n: ... and its largest [N].
+        rms_after_n: Held-out free-space force error after the calibration, RMS [N].
+        max_after_n: ... and its largest [N].
+        samples: Samples fitted on.
+        sensing: What it was fitted on: ``measured_js`` (a live console's joint efforts), ``ideal`` (a live
+            console whose free-space efforts were all zero: one that reports the exact force, as
+            ``sim-dvrk --wrench ideal`` does, or sends no efforts), or ``logs: <layouts>`` (offline).
+        console: The console of the arm it was fitted on: ``sim-dvrk``, ``dvrk`` or ``unknown``.
+    """
+
+    arm: str
+    columns: tuple[int, ...]
+    parameters: tuple[float, ...]
+    error_bound_n: float
+    error_bound_with_acceleration_n: float
+    rms_before_n: float
+    max_before_n: float
+    rms_after_n: float
+    max_after_n: float
+    samples: int
+    sensing: str = "measured_js"
+    console: str = "unknown"
+
+    @property
+    def origin(self) -> str:
+        """Where it was fitted, for a user: ``PSM1 on sim-dvrk, measured_js``."""
+        console = "an unknown console" if self.console == "unknown" else self.console
+        return f"{self.arm} on {console}, {self.sensing}"
+
+    def parameter_vector(self) -> np.ndarray:
+        """The parameters on all of the regressor's columns, zero where the calibration identified none."""
+        full = np.zeros(effort_regressor().columns)
+        full[list(self.columns)] = self.parameters
+        return full
+
+    def model_efforts(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray | None = None) -> np.ndarray:
+        """The efforts the calibration attributes to the arm itself (6,); no acceleration: its inertia left out."""
+        qdd = np.zeros(6) if qdd is None else np.asarray(qdd, dtype=float)
+        return np.asarray(
+            effort_regressor().rows(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), qdd)
+            @ self.parameter_vector()
+        )
+
+    def force(
+        self, configuration: PsmConfiguration, qd: np.ndarray, efforts: np.ndarray, qdd: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The calibrated force on the tool (3,) [N], in the configuration's base axes."""
+        residual = np.asarray(efforts, dtype=float) - self.model_efforts(configuration.q, qd, qdd)
+        return console_force(configuration.base_jacobian(), residual)
+
+    def write(self, path: Path) -> None:
+        """Write the calibration as JSON."""
+        path.write_text(json.dumps({"kind": "wrench_calibration", **asdict(self)}, indent=2) + "\n")
+
+
+_FIGURES = (
+    "error_bound_n",
+    "error_bound_with_acceleration_n",
+    "rms_before_n",
+    "max_before_n",
+    "rms_after_n",
+    "max_after_n",
+)
+
+
+def read_calibration(path: str | Path, arm: str | None = None, *, exact_console: bool = False) -> WrenchCalibration:
+    """Read a calibration file, with a named error for anything that is not one, or not one to trust.
+
+    Args:
+        path: The file (at most :data:`MAX_FILE_BYTES`).
+        arm: The arm it is for; None: any.
+        exact_console: Whether it is used where the force is exact (a check on logs); False (a console a
+            deploy drives) refuses a calibration fitted on a console that reported the exact force.
+
+    Raises:
+        ConfigurationError: Missing, too large, unreadable, not a wrench calibration, an older file without
+            the sensing and console it was fitted on, another arm's, a bound below its own held-out error or
+            beyond what the safety filter takes, or fitted on exact forces for a console that is not exact.
+    """
+    field = "--wrench-calibration"
+    size = check_regular_file(path, field, max_bytes=2**62).stat().st_size  # a regular file, then its size
+    if size > MAX_FILE_BYTES:
+        raise InputFileError(
+            field, path, f"a file of at most 1 MiB, as calibrate-wrench writes (this one is {size / 2**20:.1f} MiB)"
+        )
+    try:
+        data: Any = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise InputFileError(field, path, f"a JSON file calibrate-wrench wrote ({e})") from e
+    try:
+        if data.get("kind") != "wrench_calibration":
+            raise ValueError("not a wrench calibration")
+    except (AttributeError, ValueError) as e:
+        raise InputFileError(field, path, f"a file calibrate-wrench wrote ({e})") from e
+    if "sensing" not in data or "console" not in data:
+        raise InputFileError(
+            field,
+            path,
+            "a calibration that records the sensing and the console it was fitted on (this file is from an "
+            "earlier calibrate-wrench: re-run calibrate-wrench)",
+        )
+    try:
+        calibration = WrenchCalibration(
+            arm=str(data["arm"]),
+            columns=tuple(int(c) for c in data["columns"]),
+            parameters=tuple(float(p) for p in data["parameters"]),
+            **{k: float(data[k]) for k in _FIGURES},
+            samples=int(data["samples"]),
+            sensing=str(data["sensing"]),
+            console=str(data["console"]),
+        )
+    except (AttributeError, KeyError, TypeError, ValueError) as e:
+        raise InputFileError(field, path, f"a file this version of calibrate-wrench wrote ({e})") from e
+    _check(calibration, str(path), arm, exact_console)
+    return calibration
+
+
+def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_console: bool) -> None:
+    """Refuse a calibration that is not self-consistent, or not for this arm and console (see read_calibration)."""
+    field = "--wrench-calibration"
+    total = effort_regressor().columns
+    if len(calibration.parameters) != len(calibration.columns) or not all(0 <= c < total for c in calibration.columns):
+        raise InputFileError(field, path, f"one parameter per column, columns 0-{total - 1}")
+    if not all(map(math.isfinite, calibration.parameters)):
+        raise InputFileError(field, path, "finite parameters")
+    for name in _FIGURES:
+        value = getattr(calibration, name)
+        if not (math.isfinite(value) and value >= 0.0):
+            raise InputFileError(field, path, f"a finite, non-negative {name} (this file has {value!r})")
+    if arm is not None and calibration.arm != arm:
+        raise InputFileError(field, path, f"a calibration of {arm} (this one is {calibration.arm}'s)")
+    bound = calibration.error_bound_n
+    try:
+        SafetyConfig(force_sensing_error_n=bound)
+    except ConfigurationError as e:
+        raise InputFileError(
+            field, path, f"an error_bound_n the safety filter takes, {e.allowed} (this file has {bound:g} N)"
+        ) from None
+    for name in ("max_after_n", "error_bound_with_acceleration_n"):
+        if bound < getattr(calibration, name):
+            raise InputFileError(
+                field,
+                path,
+                f"an error_bound_n at least its own {name} (this file has {bound:g} N beside "
+                f"{getattr(calibration, name):g} N: the bound contradicts the fit)",
+            )
+    if calibration.sensing == EXACT_SENSING and not exact_console:
+        raise InputFileError(
+            field,
+            path,
+            "a calibration fitted on the console it is used with (this one was fitted where the console's "
+            "free-space efforts were all zero, as on sim-dvrk --wrench ideal: it trusts the force to "
+            f"{bound:g} N, which holds on no dVRK; re-run calibrate-wrench against this console)",
+        )
