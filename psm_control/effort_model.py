@@ -23,13 +23,15 @@ data fitted, by QR with column pivoting, and a calibration keeps those columns' 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pinocchio as pin
 from scipy.linalg import qr
 
 from psm_control.robot import PsmModel
 
-__all__ = ["EffortRegressor", "independent_columns"]
+__all__ = ["EffortRegressor", "independent_columns", "shared_regressor"]
 
 _GRAVITY_M_S2 = 9.81
 #: Inertial parameters per body in Pinocchio's regressor.
@@ -93,6 +95,13 @@ class EffortRegressor:
     def matrix(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         """The (N, 6, :attr:`columns`) regressors of N samples ``q, qd, qdd`` (N, 6)."""
         return np.stack([self.rows(q[k], qd[k], qdd[k]) for k in range(len(q))])
+
+
+@functools.cache
+def shared_regressor() -> EffortRegressor:
+    """The default PSM's regressor, one for the whole process (one Pinocchio model and data for every user:
+    the calibrations fitted and applied, the identified arms of the sensing model)."""
+    return EffortRegressor()
 
 
 def independent_columns(stacked: np.ndarray, rcond: float = 1e-7) -> np.ndarray:

@@ -152,12 +152,13 @@ class ForceBound:
         return max(0.0, self.limit_n - self.held_load_bound_n) / self.stiffness_bound_n_per_m
 
 
-def sensing_warning(config: SafetyConfig, sensing: str) -> str:
+def sensing_warning(config: SafetyConfig, sensing: str, *, calibrated: bool = False) -> str:
     """The run's warning when its force limit is below what the sensing resolves ('' when it is not).
 
     Args:
         config: The run's safety configuration.
         sensing: What the force comes from, for the message (``dvrk``, a calibration file, ...).
+        calibrated: The force is calibrated already (then calibrating is not what the message advises).
     """
     bound = ForceBound.from_config(config)
     if bound.exact or bound.error_n < bound.limit_n:
@@ -168,13 +169,12 @@ def sensing_warning(config: SafetyConfig, sensing: str) -> str:
         f"from the grasp point's travel since the grasp instead, assuming the held tissue is no stiffer than "
         f"{bound.stiffness_bound_n_per_m:g} N/m and loads the jaws by at most {bound.held_load_bound_n:.2f} N "
         f"when grasped: a retraction stops after {1000 * bound.travel_allowed_m():.1f} mm of travel. "
-        f"What you can change: {'; '.join(_remedies(sensing))}"
+        f"What you can change: {'; '.join(_remedies(calibrated))}"
     )
 
 
-def _remedies(sensing: str) -> list[str]:
+def _remedies(calibrated: bool) -> list[str]:
     """What a user can change when the sensing cannot tell the limit, for :func:`sensing_warning`."""
-    calibrated = "calibrat" in sensing or sensing.endswith(".json")
     return [
         *([] if calibrated else ["calibrate the force sensing (tissue-retract calibrate-wrench)"]),
         "declare a narrower tissue stiffness range where the tissue is known (the stiffness bound is 2.64 x the "

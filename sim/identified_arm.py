@@ -28,18 +28,13 @@ from typing import Any
 
 import numpy as np
 
-from psm_control.effort_model import EffortRegressor
+from psm_control.effort_model import shared_regressor
 from psm_control.errors import UnknownVariantError
 
 __all__ = ["ARM_FILES", "IdentifiedArm", "identified_arm"]
 
 #: The identified arms shipped with the package, by name (files in ``sim/data``).
 ARM_FILES = {"wpi-psm": "identified_arm_wpi_psm.json"}
-
-
-@functools.cache
-def _regressor() -> EffortRegressor:
-    return EffortRegressor()  # one Pinocchio model and data per process
 
 
 @dataclass(frozen=True)
@@ -66,19 +61,23 @@ class IdentifiedArm:
 
     @functools.cached_property
     def _vector(self) -> np.ndarray:
-        full = np.zeros(_regressor().columns)
+        full = np.zeros(shared_regressor().columns)
         full[list(self.columns)] = self.parameters
         return full
 
+    def parameter_vector(self) -> np.ndarray:
+        """The parameters on all of the regressor's columns, zero where the identification found none."""
+        return self._vector.copy()
+
     def efforts(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         """The arm's free-space joint efforts (6,) at ``q, qd, qdd``."""
-        return np.asarray(_regressor().rows(q, qd, qdd) @ self._vector)
+        return np.asarray(shared_regressor().rows(q, qd, qdd) @ self._vector)
 
     def inertial_efforts(self, q: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         """The part of :meth:`efforts` the acceleration makes, ``M(q) qdd`` (6,): what a calibration that is
         given no acceleration (a deploy's, from single ``measured_js`` messages) leaves."""
         zero = np.zeros(6)
-        rows = _regressor().rows
+        rows = shared_regressor().rows
         return np.asarray((rows(q, zero, qdd) - rows(q, zero, zero)) @ self._vector)
 
     def to_json(self) -> dict[str, Any]:

@@ -91,7 +91,9 @@ def check_sweep_policy(
     resolve_policy(policy, env, allow_other_task=allow_other_task)
     _, info = env.reset(seed=0)
     check_start_inside_workspace(env, float(info["workspace_violation_m"]))
-    warning = sensing_warning(env.unwrapped.safety_config, f"{force_sensing} force sensing")
+    warning = sensing_warning(
+        env.unwrapped.safety_config, f"{force_sensing} force sensing", calibrated=force_sensing == "dvrk-calibrated"
+    )
     for key in [k for k in _CACHE if k[0] == "env"]:
         _CACHE.pop(key).close()
     return warning

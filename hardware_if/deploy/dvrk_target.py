@@ -57,7 +57,9 @@ def deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder
         error_n = error_bound_n(sensing_params("dvrk"))
     config = with_sensing(config, error_n, DEFAULT_RANGES)  # the task flap's ranges: the tissue assumed
     # Said before anything reaches the arm: a limit the robot's force sensing cannot tell.
-    warn_sensing(config, options.force_sensing_source, recorder, echo)
+    warn_sensing(
+        config, options.force_sensing_source, recorder, echo, calibrated=options.wrench_calibration is not None
+    )
     configured = "the default" if options.safety_config is None else "from the safety configuration"
     echo(
         f"deadman: the arm holds when measured_js is older than {config.deadman_timeout_s:g} s "

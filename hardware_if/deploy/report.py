@@ -190,9 +190,9 @@ def record_hold(report: DeployReport, recorder: Recorder, fault: HoldError) -> N
     recorder.write("/deploy/event", {"kind": "hold", "text": str(fault), "fault": fault.kind, "data": fault.data})
 
 
-def warn_sensing(config: SafetyConfig, source: str, recorder: Recorder, echo: Any) -> None:
+def warn_sensing(config: SafetyConfig, source: str, recorder: Recorder, echo: Any, *, calibrated: bool) -> None:
     """Tell the user, and the recording, when the force limit is below what the sensing resolves."""
-    warning = sensing_warning(config, source)
+    warning = sensing_warning(config, source, calibrated=calibrated)
     if warning:
         echo(warning)
         recorder.write("/deploy/event", {"kind": "force_sensing_warning", "text": warning})

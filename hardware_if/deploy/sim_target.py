@@ -69,7 +69,10 @@ def deploy_sim(options: DeployOptions, report: DeployReport, recorder: Recorder,
         policy, reset = policy_for(options, env, echo)
         env.reset(seed=options.seed)  # builds the chain once; wrap it so every tick is recorded
         unwrapped: Any = env.unwrapped
-        warn_sensing(unwrapped.safety_config, f"{options.force_sensing} force sensing", recorder, echo)
+        calibrated = options.force_sensing == "dvrk-calibrated"
+        warn_sensing(
+            unwrapped.safety_config, f"{options.force_sensing} force sensing", recorder, echo, calibrated=calibrated
+        )
         unwrapped.controller = _RecordingChain(unwrapped.controller, report, recorder, stopper)
         budget = options.policy_budget_s or unwrapped.config.physics.step_s
         checked = checked_policy(policy, budget)

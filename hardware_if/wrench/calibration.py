@@ -17,30 +17,20 @@ from typing import Any
 
 import numpy as np
 
-from psm_control.effort_model import EffortRegressor
+from psm_control.effort_model import shared_regressor
 from psm_control.errors import ConfigurationError, InputFileError
 from psm_control.inputs import check_regular_file
 from psm_control.robot import PsmConfiguration
 from safety.config import SafetyConfig
 from sim.force_sensing import console_force
 
-__all__ = ["EXACT_SENSING", "MAX_FILE_BYTES", "WrenchCalibration", "effort_regressor", "read_calibration"]
+__all__ = ["EXACT_SENSING", "MAX_FILE_BYTES", "WrenchCalibration", "read_calibration"]
 
 #: Largest calibration file read [bytes] (1 MiB): one holds a few hundred numbers, a few kilobytes.
 MAX_FILE_BYTES = 1024 * 1024
 #: ``sensing`` of a calibration fitted where the console's free-space efforts were all zero: a console that
 #: reports the exact force (``sim-dvrk --wrench ideal``), or one that sends no efforts.
 EXACT_SENSING = "ideal"
-
-_REGRESSOR: EffortRegressor | None = None
-
-
-def effort_regressor() -> EffortRegressor:
-    """The effort regressor the calibrations are fitted and applied with (one for the whole process)."""
-    global _REGRESSOR  # one Pinocchio model and data for every calibration of the process
-    if _REGRESSOR is None:
-        _REGRESSOR = EffortRegressor()
-    return _REGRESSOR
 
 
 @dataclass(frozen=True)
@@ -87,7 +77,7 @@ class WrenchCalibration:
 
     def parameter_vector(self) -> np.ndarray:
         """The parameters on all of the regressor's columns, zero where the calibration identified none."""
-        full = np.zeros(effort_regressor().columns)
+        full = np.zeros(shared_regressor().columns)
         full[list(self.columns)] = self.parameters
         return full
 
@@ -95,7 +85,7 @@ class WrenchCalibration:
         """The efforts the calibration attributes to the arm itself (6,); no acceleration: its inertia left out."""
         qdd = np.zeros(6) if qdd is None else np.asarray(qdd, dtype=float)
         return np.asarray(
-            effort_regressor().rows(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), qdd)
+            shared_regressor().rows(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), qdd)
             @ self.parameter_vector()
         )
 
@@ -176,7 +166,7 @@ def read_calibration(path: str | Path, arm: str | None = None, *, exact_console:
 def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_console: bool) -> None:
     """Refuse a calibration that is not self-consistent, or not for this arm and console (see read_calibration)."""
     field = "--wrench-calibration"
-    total = effort_regressor().columns
+    total = shared_regressor().columns
     if len(calibration.parameters) != len(calibration.columns) or not all(0 <= c < total for c in calibration.columns):
         raise InputFileError(field, path, f"one parameter per column, columns 0-{total - 1}")
     if not all(map(math.isfinite, calibration.parameters)):

@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from hardware_if.wrench.calibration import WrenchCalibration, effort_regressor
+from hardware_if.wrench.calibration import WrenchCalibration
 from hardware_if.wrench.joint_logs import JointLog, JointLogError
-from psm_control.effort_model import independent_columns
+from psm_control.effort_model import independent_columns, shared_regressor
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
 from safety.config import SafetyConfig
@@ -121,7 +121,7 @@ def prepare_log(log: JointLog, cutoff_hz: float = CUTOFF_HZ) -> PreparedLog:
     b, a = butter(2, min(cutoff_hz, 0.4 * rate) / (rate / 2.0))
     qd = filtfilt(b, a, log.qd, axis=0)
     qdd = np.gradient(qd, log.t_s, axis=0)
-    regressor = effort_regressor()
+    regressor = shared_regressor()
     configuration = PsmModel().configuration()
     projector, speed = np.zeros((len(log.q), 3, 6)), np.zeros(len(log.q))
     rows, rows_static = [], []
@@ -250,7 +250,7 @@ def inertia_allowance_n(
     """
     limits = SafetyConfig().acceleration if accelerations is None else np.asarray(accelerations, dtype=float)
     corners = np.array(np.meshgrid(*[[-1.0, 1.0]] * 6, indexing="ij")).reshape(6, -1) * limits[:, None]
-    regressor, zero, worst = effort_regressor(), np.zeros(6), 0.0
+    regressor, zero, worst = shared_regressor(), np.zeros(6), 0.0
     for p in logs:
         for k in range(0, len(p.log.q), every):
             q = p.log.q[k]
@@ -314,7 +314,7 @@ def fit_calibration(
         [(p.rows * w[None, :, None]).reshape(-1, p.rows.shape[2]) for p, w in zip(fit, weights, strict=True)]
     )
     target = np.concatenate([(p.log.effort * w).reshape(-1) for p, w in zip(fit, weights, strict=True)])
-    dynamic = effort_regressor().friction_start // 4  # the first columns: the rigid body's inertia and Coriolis
+    dynamic = shared_regressor().friction_start // 4  # the first columns: the rigid body's inertia and Coriolis
     fits = [_solve(design, target, samples, exclude=0), _solve(design, target, samples, exclude=dynamic)]
     errors = [FreeSpaceError._rms(_free_space_error(parameters, held_out).after_n) for _, parameters in fits]
     with_dynamics = not errors[0] > (1.0 - DYNAMICS_GAIN) * errors[1]

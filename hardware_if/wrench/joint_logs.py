@@ -23,6 +23,7 @@ Bad logs raise a :class:`JointLogError` subclass that names the file and what is
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,7 @@ __all__ = [
     "NoEffortsError",
     "NonFiniteLogError",
     "TruncatedLogError",
+    "joint_log_from_ticks",
     "read_joint_log",
 ]
 
@@ -240,6 +242,26 @@ def _read_bag(path: Path, arm: str) -> JointLog:
     return _checked(JointLog(str(path), "rosbag2", t_s, q_arr, qd_arr, np.asarray(effort)))
 
 
+def joint_log_from_ticks(
+    source: str, layout: str, ticks: Sequence[tuple[float, np.ndarray, np.ndarray, np.ndarray]]
+) -> JointLog:
+    """A joint log of a control loop's ticks ``(stamp_s, q, qd, effort)``, time from the first.
+
+    A tick that read the measurement the tick before read too repeats its stamp: it is the same sample, and
+    only its first reading is kept.
+    """
+    kept = [tick for k, tick in enumerate(ticks) if k == 0 or tick[0] > ticks[k - 1][0]]
+    t_s = np.array([float(tick[0]) for tick in kept])
+    return JointLog(
+        source,
+        layout,
+        t_s - t_s[0],
+        np.array([tick[1] for tick in kept], dtype=float),
+        np.array([tick[2] for tick in kept], dtype=float),
+        np.array([tick[3] for tick in kept], dtype=float),
+    )
+
+
 def _read_recording(path: Path) -> JointLog:
     from hardware_if.recording.recorder import read_recording  # mcap: the deploy's own recording format
 
@@ -248,19 +270,8 @@ def _read_recording(path: Path) -> JointLog:
         raise MissingTopicError(path, "a recording with /deploy/measured messages")
     if any("effort" not in row for row in rows):
         raise NoEffortsError(path, "measurements with efforts ('effort' in /deploy/measured); this recording has none")
-    # A tick that read the measurement the tick before read too repeats its stamp: it is the same sample.
-    rows = [row for k, row in enumerate(rows) if k == 0 or float(row["stamp_s"]) > float(rows[k - 1]["stamp_s"])]
-    t_s = np.array([float(row["stamp_s"]) for row in rows])
-    return _checked(
-        JointLog(
-            str(path),
-            "recording",
-            t_s - t_s[0],
-            np.array([row["q"] for row in rows], dtype=float),
-            np.array([row["qd"] for row in rows], dtype=float),
-            np.array([row["effort"] for row in rows], dtype=float),
-        )
-    )
+    ticks = [(float(row["stamp_s"]), row["q"], row["qd"], row["effort"]) for row in rows]
+    return _checked(joint_log_from_ticks(str(path), "recording", ticks))
 
 
 def _is_recording(path: Path) -> bool:

@@ -92,8 +92,7 @@ def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
     fit = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.logs]
     held_out = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.held_out]
     calibration, _ = fit_calibration(args.arm, fit, held_out)
-    vector = np.zeros(held_out[0].rows.shape[2])
-    vector[list(calibration.columns)] = calibration.parameters
+    vector = calibration.parameter_vector()
     residual = np.concatenate([p.log.effort - p.rows @ vector for p in held_out])
     lags = []
     for joint in range(6):  # the 1/e lag of each joint's residual autocorrelation
@@ -207,8 +206,7 @@ def run(args: argparse.Namespace) -> int:
         log = prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate))
         dt_s = 1.0 / log.log.rate_hz
         residual = _residual(arm, len(log.log.q), dt_s, np.random.default_rng(0))
-        vector = np.zeros(log.rows.shape[2])
-        vector[list(arm.columns)] = arm.parameters
+        vector = arm.parameter_vector()
         full = log.rows @ vector
         inertia = full - log.rows_static @ vector
         entry = {

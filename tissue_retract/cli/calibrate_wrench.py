@@ -99,7 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...], duration_s: float, wait_s: float):
-    """Drive one excitation trajectory; return its samples ``(jacobian, insertion, qd, efforts)``."""
+    """Drive one excitation trajectory; return its measurements as a joint log."""
     local = PsmModel().configuration()
     measured = client.wait_for_measurement(wait_s)
     chain.reset(measured)
@@ -143,23 +143,9 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
             next_tick = time.monotonic()
         measured = client.measure()
         samples.append((measured.stamp_s, np.asarray(measured.q), np.asarray(measured.qd), client.efforts()))
-    return _joint_log(samples)
+    from hardware_if.wrench.joint_logs import joint_log_from_ticks
 
-
-def _joint_log(samples: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]) -> Any:
-    """The excitation's samples as a joint log (repeated stamps, a measurement read twice, dropped)."""
-    from hardware_if.wrench.joint_logs import JointLog
-
-    kept = [s for i, s in enumerate(samples) if i == 0 or s[0] > samples[i - 1][0]]
-    t_s = np.array([s[0] for s in kept])
-    return JointLog(
-        "calibrate-wrench excitation",
-        "live",
-        t_s - t_s[0],
-        np.array([s[1] for s in kept]),
-        np.array([s[2] for s in kept]),
-        np.array([s[3] for s in kept]),
-    )
+    return joint_log_from_ticks("calibrate-wrench excitation", "live", samples)
 
 
 def _to_start(client: Any, wait_s: float) -> None:

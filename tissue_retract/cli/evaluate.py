@@ -133,7 +133,11 @@ def run(args: argparse.Namespace) -> int:
         tissue=tissue_params(args.texture),
         force_sensing=args.force_sensing,
     )
-    sensing = sensing_warning(env.unwrapped.safety_config, f"{args.force_sensing} force sensing")
+    sensing = sensing_warning(
+        env.unwrapped.safety_config,
+        f"{args.force_sensing} force sensing",
+        calibrated=args.force_sensing == "dvrk-calibrated",
+    )
     announce(sensing)
     unseen_texture = texture_warning(estimator, args.texture)
     announce(unseen_texture)
