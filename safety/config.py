@@ -320,8 +320,8 @@ class SafetyConfig:
             )
         if not (_is_number(self.stiffness_forgetting) and 0.5 < self.stiffness_forgetting <= 1.0):
             raise ConfigurationError("stiffness_forgetting", self.stiffness_forgetting, "a number in (0.5, 1]")
-        if not (_is_number(self.force_sensing_error_n) and 0.0 <= self.force_sensing_error_n <= 100.0):
-            raise ConfigurationError("force_sensing_error_n", self.force_sensing_error_n, "a number in [0, 100] N")
+        if not (_is_number(self.force_sensing_error_n) and 0.0 <= self.force_sensing_error_n <= 1000.0):
+            raise ConfigurationError("force_sensing_error_n", self.force_sensing_error_n, "a number in [0, 1000] N")
         _positive("tissue_stiffness_bound_n_per_m", self.tissue_stiffness_bound_n_per_m, 1e5, lower=1.0)
         if not (_is_number(self.held_load_bound_n) and 0.0 <= self.held_load_bound_n <= 50.0):
             raise ConfigurationError("held_load_bound_n", self.held_load_bound_n, "a number in [0, 50] N")
