@@ -57,32 +57,74 @@ def test_the_console_inverts_the_tissue_load_exactly() -> None:
         assert np.allclose(console_force(jacobian, jacobian[:3].T @ force), force, atol=1e-9)
 
 
+def _smooth_motion(ticks: int, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """A Lissajous motion (q, qd) whose accelerations stay within the chain's default limits."""
+    t_s = np.arange(ticks) * dt_s
+    amplitude = np.array([0.4, 0.4, 0.05, 0.6, 0.6, 0.6])
+    frequency = np.array([3.1, 2.3, 3.0, 6.0, 5.1, 4.3])  # rad/s
+    q = PsmModel().home() + amplitude * np.sin(np.outer(t_s, frequency))
+    q[:, 2] = 0.12 + amplitude[2] * np.sin(frequency[2] * t_s)
+    return q, amplitude * frequency * np.cos(np.outer(t_s, frequency))
+
+
 def test_dvrk_free_space_force_is_off_by_a_pose_dependent_error_within_its_bound() -> None:
-    """dvrk in free space: never zero, changes with pose, within error_bound_n; calibrated smaller, ideal zero."""
+    """dvrk in free space, moving within the chain's limits: never zero, changes with the motion, within
+    error_bound_n; the calibrated bound far smaller, ideal zero."""
     configuration = PsmModel().configuration()
     bound = error_bound_n(sensing_params("dvrk"))
     sensor = ForceSensor(sensing_params("dvrk"), np.random.default_rng(3))
-    rng = np.random.default_rng(4)
+    dt_s = 0.01
+    q, qd = _smooth_motion(600, dt_s)
     readings = []
-    for q in _poses(rng, 200):
-        configuration.update(q)
-        readings.append(sensor.measure(configuration, rng.uniform(-0.5, 0.5, 6), np.zeros(3), 0.01))
+    for k in range(len(q)):
+        configuration.update(q[k])
+        readings.append(sensor.measure(configuration, qd[k], np.zeros(3), dt_s))
     magnitudes = np.linalg.norm(readings, axis=1)
     assert magnitudes.min() > 0.05 and magnitudes.max() <= bound
-    assert np.ptp(np.asarray(readings), axis=0).max() > 0.5  # moves with the pose by a large fraction of a newton
+    assert np.ptp(np.asarray(readings), axis=0).max() > 1.0  # moves with the pose and motion by newtons
     assert 0.0 < error_bound_n(sensing_params("dvrk-calibrated")) < bound / 3
     assert error_bound_n(sensing_params("ideal")) == 0.0
 
 
+def test_the_bound_follows_the_chains_acceleration_limits() -> None:
+    """The uncalibrated bound shrinks with the chain's acceleration limits (its inertia part), never below
+    what the arm's gravity and friction give at rest."""
+    full = error_bound_n(sensing_params("dvrk"))
+    gentle = error_bound_n(sensing_params("dvrk"), SafetyConfig(acceleration_limit=(1.0, 1.0, 0.1, 4.0, 4.0, 4.0)))
+    assert gentle < 0.7 * full
+    assert gentle > 1.0
+
+
+def test_calibrated_sensing_leaves_the_residual_and_the_tracking_errors_inertia() -> None:
+    """dvrk-calibrated: an arm that tracks the commanded acceleration reads only the residual (as the same draw
+    of dvrk's, less the arm's efforts); a tracking error adds the inertia of its acceleration."""
+    configuration = PsmModel().configuration()
+    calibrated = ForceSensor(sensing_params("dvrk-calibrated"), np.random.default_rng(7))
+    lagging = ForceSensor(sensing_params("dvrk-calibrated"), np.random.default_rng(7))
+    dt_s = 0.01
+    q, qd = _smooth_motion(200, dt_s)
+    tracked, lagged = [], []
+    for k in range(len(q)):
+        configuration.update(q[k])
+        tracked.append(np.linalg.norm(calibrated.measure(configuration, qd[k], np.zeros(3), dt_s, qd[k])))
+        lagged.append(np.linalg.norm(lagging.measure(configuration, qd[k], np.zeros(3), dt_s, 0.5 * qd[k])))
+    assert max(tracked) < 3.0 * error_bound_n(sensing_params("dvrk-calibrated"))
+    assert float(np.sqrt(np.mean(np.square(lagged)))) > 1.5 * float(np.sqrt(np.mean(np.square(tracked))))
+
+
 def test_sensing_scale_scales_every_error_term() -> None:
-    """force_sensing_scale 0 makes the dvrk model exact; 2 doubles its deterministic error."""
+    """force_sensing_scale 0 makes the dvrk model exact; 2 doubles its error (the same residual draw)."""
     configuration = PsmModel().configuration()
     configuration.update(np.array([0.2, -0.1, 0.1, 0.1, 0.2, 0.0]))
     params = sensing_params("dvrk")
     zero = ForceSensor(params.scaled(0.0))
     assert zero.params.exact and np.allclose(zero.measure(configuration, np.zeros(6), np.ones(3), 0.01), np.ones(3))
-    quiet = params.scaled(1.0)
-    assert quiet is params
+    assert params.scaled(1.0) is params
+    qd = np.array([0.1, -0.2, 0.01, 0.3, 0.1, -0.1])
+    once = ForceSensor(params, np.random.default_rng(8)).measure(configuration, qd, np.zeros(3), 0.0)
+    twice = ForceSensor(params.scaled(2.0), np.random.default_rng(8)).measure(configuration, qd, np.zeros(3), 0.0)
+    np.testing.assert_allclose(twice, 2.0 * once)
+    assert error_bound_n(params.scaled(2.0)) == pytest.approx(2.0 * error_bound_n(params), rel=0.05)
 
 
 def test_unknown_sensing_is_named() -> None:
