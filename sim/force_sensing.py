@@ -60,6 +60,8 @@ __all__ = [
 _PINV_RCOND = 1e-4
 #: The identified arm of the dVRK presets.
 _ARM = "wpi-psm"
+#: Time constant of the accelerations the arm's inertia is computed from [s].
+_ACCELERATION_TIME_S = 0.02
 
 
 @dataclass(frozen=True)
@@ -146,6 +148,7 @@ class ForceSensor:
         self._residual = self._residual_std * rng.standard_normal(6)
         self._last_qd: np.ndarray | None = None
         self._last_commanded_qd: np.ndarray | None = None
+        self._qdd, self._commanded_qdd = np.zeros(6), np.zeros(6)
 
     def arm_efforts(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, commanded_qdd: np.ndarray) -> np.ndarray:
         """The identified arm's part of the efforts (6,): all of it, or the inertia of the tracking error
@@ -179,12 +182,14 @@ class ForceSensor:
             return np.asarray(efforts)
         qd = np.asarray(qd, dtype=float)
         commanded = qd if commanded_qd is None else np.asarray(commanded_qd, dtype=float)
-        qdd, commanded_qdd = np.zeros(6), np.zeros(6)
         if self._last_qd is not None and self._last_commanded_qd is not None and dt_s > 0.0:
-            qdd = (qd - self._last_qd) / dt_s  # the arm's and the chain's mean accelerations over the tick
-            commanded_qdd = (commanded - self._last_commanded_qd) / dt_s
+            # The arm's and the chain's mean accelerations over the tick, smoothed as the arm's mass and servo
+            # smooth a velocity that steps (a console that differences set-points arriving between its ticks).
+            blend = dt_s / (_ACCELERATION_TIME_S + dt_s)
+            self._qdd += blend * ((qd - self._last_qd) / dt_s - self._qdd)
+            self._commanded_qdd += blend * ((commanded - self._last_commanded_qd) / dt_s - self._commanded_qdd)
         self._last_qd, self._last_commanded_qd = qd.copy(), commanded.copy()
-        efforts = efforts + self.arm_efforts(configuration.q, qd, qdd, commanded_qdd)
+        efforts = efforts + self.arm_efforts(configuration.q, qd, self._qdd, self._commanded_qdd)
         if dt_s > 0.0 and np.any(self._residual_std):
             decay = math.exp(-dt_s / self._residual_time_s)
             self._residual = decay * self._residual + self._residual_std * math.sqrt(
