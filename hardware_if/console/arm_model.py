@@ -8,11 +8,15 @@ the same protocol and also reports the tissue force for ``body/measured_cf``.
 
 from __future__ import annotations
 
+import collections
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-__all__ = ["ArmModel", "ArmSample", "KinematicArm"]
+__all__ = ["VELOCITY_WINDOW_S", "ArmModel", "ArmSample", "KinematicArm"]
+
+#: The span the kinematic arm's velocities are measured over [s]: a few of the console's ticks.
+VELOCITY_WINDOW_S = 0.04
 
 
 class ArmSample(NamedTuple):
@@ -57,23 +61,28 @@ class ArmModel(Protocol):
 class KinematicArm:
     """The dVRK's "KINEMATIC" simulation: the measured joints are the last commanded ones.
 
-    Velocities are finite differences of successive set-points over the step.
+    Velocities are the set-points' change over the last :data:`VELOCITY_WINDOW_S` of steps. Set-points arrive
+    between the console's ticks, so a difference over one tick alternates between no motion and twice it; a
+    real arm's encoders see its mass move smoothly, and the efforts its inertia needs (the force sensing's)
+    follow that smooth velocity.
     """
 
     instantaneous = True
 
     def __init__(self) -> None:
         self._q = np.zeros(6)
-        self._previous = np.zeros(6)
         self._jaw = 0.0
         self._qd = np.zeros(6)
+        self._history: collections.deque[tuple[float, np.ndarray]] = collections.deque()
+        self._elapsed_s = 0.0
 
     def reset(self, q: np.ndarray, jaw: float) -> ArmSample:
         """Place the arm at ``q``, at rest."""
         self._q = np.asarray(q, dtype=float).copy()
-        self._previous = self._q.copy()
         self._jaw = float(jaw)
         self._qd = np.zeros(6)
+        self._elapsed_s = 0.0
+        self._history = collections.deque([(0.0, self._q.copy())])
         return self._sample()
 
     def command(self, q: np.ndarray, jaw: float) -> None:
@@ -82,10 +91,14 @@ class KinematicArm:
         self._jaw = float(jaw)
 
     def step(self, dt_s: float) -> ArmSample:
-        """Report the last command; velocities over ``dt_s`` when it is positive."""
+        """Report the last command; velocities over the window when ``dt_s`` is positive."""
         if dt_s > 0.0:
-            self._qd = (self._q - self._previous) / dt_s
-            self._previous = self._q.copy()
+            self._elapsed_s += dt_s
+            self._history.append((self._elapsed_s, self._q.copy()))
+            while len(self._history) > 2 and self._elapsed_s - self._history[1][0] >= VELOCITY_WINDOW_S:
+                self._history.popleft()
+            start_s, start_q = self._history[0]
+            self._qd = (self._q - start_q) / (self._elapsed_s - start_s)
         return self._sample()
 
     def _sample(self) -> ArmSample:
