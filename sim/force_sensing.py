@@ -45,6 +45,7 @@ from safety.config import SafetyConfig
 from sim.identified_arm import IdentifiedArm, identified_arm
 
 __all__ = [
+    "HELD_STILL_ERROR_N",
     "SENSING_NAMES",
     "SENSING_PRESETS",
     "ForceSensor",
@@ -212,6 +213,14 @@ class ForceSensor:
         return console_force(configuration.base_jacobian(), efforts)
 
 
+#: The largest calibrated free-space error measured on a real PSM held still [N]: radiang's arm calibrated on its
+#: two slow trajectories, checked on its static holds (``tissue-retract calibrate-wrench --from
+#: Data250_6.21.2017 Data_Pos_6.19.2017 --held-out DataHold_6.8.2017``: 5.77 N at most, 2.34 N RMS, 40 of its
+#: samples at 5-8 cm insertion). At rest a joint's friction is anywhere in its band, which no fit of motion
+#: removes; the identified arm's residual, measured moving, does not cover it.
+HELD_STILL_ERROR_N = 5.77
+#: A calibration's bound over its largest held-out error (``calibrate-wrench``'s margin).
+_CALIBRATION_MARGIN = 1.25
 #: The bound is the largest error drawn, times this.
 _BOUND_MARGIN = 1.1
 #: The residual's edge in the bound's draws, in standard deviations.
@@ -257,16 +266,17 @@ def error_bound_n(
     proportional to the acceleration limits. The tissue's force adds exactly (the console's ``pinv(J^T)``
     undoes ``J^T``), so the free-space error is the error at any load.
 
-    The calibrated estimate (``tracking``): the identified arm's :attr:`~sim.identified_arm.IdentifiedArm.
-    residual_bound_n`, 1.25 x the largest error its identification left on the held-out log at retraction
-    speeds, as ``calibrate-wrench`` bounds its own fit. It holds while the arm tracks the chain's commanded
-    acceleration; the inertia of a tracking error is not in it.
+    The calibrated estimate (``tracking``): 1.25 x the largest error a calibration left on a held-out real log
+    at retraction speeds, as ``calibrate-wrench`` bounds its own fit: the identified arm's
+    :attr:`~sim.identified_arm.IdentifiedArm.residual_bound_n` (its own held-out log, moving), or
+    :data:`HELD_STILL_ERROR_N` (another arm held still) when larger. It holds while the arm tracks the chain's
+    commanded acceleration; the inertia of a tracking error is not in it.
     """
     if params.exact:
         return 0.0
     arm = params.identified_arm
     if params.arm_terms == "tracking" and arm is not None:
-        return params.scale * arm.residual_bound_n
+        return params.scale * max(arm.residual_bound_n, _CALIBRATION_MARGIN * HELD_STILL_ERROR_N)
     config = config if config is not None else SafetyConfig()
     velocity = tuple(float(v) for v in config.velocity)
     acceleration = tuple(float(a) for a in config.acceleration)
