@@ -32,7 +32,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -266,13 +266,19 @@ _RIDGE_STRENGTHS = (0.0, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2)
 _FOLDS = 5
 
 
-def _ridge(design: np.ndarray, target: np.ndarray, strength: float) -> np.ndarray:
-    """Ridge least squares on unit-norm columns (the strength means the same for every column's units)."""
+def _ridge_solver(design: np.ndarray, target: np.ndarray) -> Callable[[float], np.ndarray]:
+    """Ridge least squares on unit-norm columns (a strength means the same for every column's units), one SVD
+    for every strength: the solver returns the parameters for a strength (0: plain least squares)."""
     norms = np.maximum(np.linalg.norm(design, axis=0), 1e-12)
-    scaled = design / norms
-    u, s, vt = np.linalg.svd(scaled, full_matrices=False)
-    gains = s / (s * s + strength) if strength > 0.0 else np.where(s > s[0] * 1e-10, 1.0 / np.maximum(s, 1e-300), 0.0)
-    return (vt.T @ (gains * (u.T @ target))) / norms
+    u, s, vt = np.linalg.svd(design / norms, full_matrices=False)
+    projected = u.T @ target
+    kept = s > s[0] * 1e-10
+
+    def solve(strength: float) -> np.ndarray:
+        gains = np.divide(s, s * s + strength, out=np.zeros_like(s), where=kept)
+        return np.asarray((vt.T @ (gains * projected)) / norms)
+
+    return solve
 
 
 def _ridge_strength(design: np.ndarray, target: np.ndarray) -> float:
@@ -288,13 +294,9 @@ def _ridge_strength(design: np.ndarray, target: np.ndarray) -> float:
     for start, stop in itertools.pairwise(edges):
         keep = np.ones(len(target), dtype=bool)
         keep[start:stop] = False
-        norms = np.maximum(np.linalg.norm(design[keep], axis=0), 1e-12)
-        u, s, vt = np.linalg.svd(design[keep] / norms, full_matrices=False)
-        projected = u.T @ target[keep]
+        solve = _ridge_solver(design[keep], target[keep])
         for k, strength in enumerate(_RIDGE_STRENGTHS):
-            gains = s / (s * s + strength) if strength > 0.0 else np.where(s > s[0] * 1e-10, 1.0 / s, 0.0)
-            values = (vt.T @ (gains * projected)) / norms
-            errors[k] += float(np.sum(np.square(design[start:stop] @ values - target[start:stop])))
+            errors[k] += float(np.sum(np.square(design[start:stop] @ solve(strength) - target[start:stop])))
     return _RIDGE_STRENGTHS[int(np.argmin(errors))]
 
 
@@ -311,7 +313,7 @@ def _solve(design: np.ndarray, target: np.ndarray, samples: int, exclude: int) -
             "samples", samples, f"at least {4 * len(columns) // 6} to fit {len(columns)} parameters"
         )
     chosen = design[:, columns]
-    values = _ridge(chosen, target, _ridge_strength(chosen, target))
+    values = _ridge_solver(chosen, target)(_ridge_strength(chosen, target))
     parameters = np.zeros(design.shape[1])
     parameters[columns] = values
     return columns, parameters

@@ -240,8 +240,9 @@ def run(args: argparse.Namespace) -> int:
             "its error_bound_with_acceleration_n: the calibration is given the chain's commanded acceleration, "
             "and the bound holds while the arm tracks it"
             if calibration is not None
-            else "the dvrk sensing model's error bound; a real PSM's free-space error is several times the "
-            "model's (tissue-retract bench sensing on its logs): on a robot, calibrate-wrench first"
+            else "the dvrk sensing model's error bound: a real PSM's identified free-space efforts at the chain's "
+            "acceleration limits, mostly the arm's inertia; the force limit is kept from the travel: on a robot, "
+            "calibrate-wrench first"
         )
         print(
             f"force sensing: {sensing_source}; the filter trusts the force to {sensing_error_n:.3g} N ({bound})",
