@@ -27,6 +27,7 @@ __all__ = [
     "DEADMAN_MIN_PERIODS",
     "FORCE_PRESETS",
     "MAX_CONTROL_RATE_HZ",
+    "MAX_FORCE_LIMIT_N",
     "MIN_CONTROL_RATE_HZ",
     "MIN_FORCE_LIMIT_N",
     "ForcePreset",
@@ -73,6 +74,8 @@ DEADMAN_MIN_PERIODS = 2
 #: noise. Limits near it are allowed (a limit below the held tissue's static load is warned about at
 #: grasp); the most delicate preset (nerve) is 0.4 N.
 MIN_FORCE_LIMIT_N = 0.01
+#: The largest force limit the filter takes [N].
+MAX_FORCE_LIMIT_N = 50.0
 #: Plausible joint-limit settings as multiples of the dVRK's move_jp limits of each joint: from
 #: ``low`` (slower than this never reaches a target) to ``high`` (faster than any arm can servo).
 _RATE_FACTORS: dict[str, tuple[float, float]] = {
@@ -308,7 +311,7 @@ class SafetyConfig:
         if self.tissue not in FORCE_PRESETS:
             raise UnknownVariantError("tissue", self.tissue, FORCE_PRESETS)
         if self.force_limit_n is not None:
-            _positive("force_limit_n", self.force_limit_n, 50.0, lower=MIN_FORCE_LIMIT_N)
+            _positive("force_limit_n", self.force_limit_n, MAX_FORCE_LIMIT_N, lower=MIN_FORCE_LIMIT_N)
         _positive("stiffness_min_n_per_m", self.stiffness_min_n_per_m, 1e5, lower=1.0)
         _positive("stiffness_max_n_per_m", self.stiffness_max_n_per_m, 1e5, lower=1.0)
         _positive("stiffness_prior_n_per_m", self.stiffness_prior_n_per_m, 1e5, lower=1.0)
