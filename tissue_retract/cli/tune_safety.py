@@ -159,8 +159,7 @@ def _nothing_recommended(
             raise_limit = (
                 f"Raise --max-force-n above {sensing_error_n:.2f} N if the tissue allows it, or {better}"
                 if sensing_error_n < MAX_FORCE_LIMIT_N
-                else f"No force limit the safety filter takes ({MAX_FORCE_LIMIT_N:g} N at most) is above it: "
-                + better
+                else f"No force limit the safety filter takes ({MAX_FORCE_LIMIT_N:g} N at most) is above it: " + better
             )
             why += (
                 f"; every one of those limits is below the force sensing's error bound {sensing_error_n:.2f} N "
