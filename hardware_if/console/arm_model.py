@@ -29,6 +29,8 @@ class ArmSample(NamedTuple):
         force_n: Force on the tool (3,) [N], in the base frame's axes.
         jaw_velocity: Measured jaw velocity [rad/s].
         jaw_effort: Jaw effort [N m] (negative: squeezing something between the jaws).
+        elapsed_s: The arm's own time this step advanced [s] (a physics model steps in whole steps, so some
+            of the console's ticks move it and some do not); None: the console's tick.
     """
 
     q: np.ndarray
@@ -37,6 +39,7 @@ class ArmSample(NamedTuple):
     force_n: np.ndarray
     jaw_velocity: float = 0.0
     jaw_effort: float = 0.0
+    elapsed_s: float | None = None
 
 
 class ArmModel(Protocol):

@@ -286,7 +286,7 @@ class TaskArm:
         During a scene reset the arm is returned as it was and no simulated time passes.
         """
         if not self._scene_lock.acquire(blocking=False):
-            return self._held
+            return self._held._replace(elapsed_s=0.0)
         try:
             self._held = self._step(dt_s)
             return self._held
@@ -297,7 +297,7 @@ class TaskArm:
         if self._at_rest():  # a still scene is not stepped, but the endoscope keeps filming it
             self._debt_s, self._qd = 0.0, np.zeros(6)
             self._offer_frame()
-            return self._held
+            return self._held._replace(qd=self._qd.copy(), elapsed_s=0.0)
         self._debt_s += max(dt_s, 0.0)
         before = np.asarray(self.env.backend.q, dtype=float).copy()
         steps = 0
@@ -354,7 +354,7 @@ class TaskArm:
             effort = -grasp.pinch_force_n * JAW_LEVER_M if holding else 0.0
         self._jaw = jaw
         q = np.asarray(backend.q, dtype=float).copy()
-        return ArmSample(q, self._qd.copy(), jaw, force, velocity, effort)
+        return ArmSample(q, self._qd.copy(), jaw, force, velocity, effort, elapsed_s=dt_s)
 
     def close(self) -> None:
         """Release the physics client (after a reset that is running)."""
