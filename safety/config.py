@@ -27,6 +27,7 @@ __all__ = [
     "DEADMAN_MIN_PERIODS",
     "FORCE_PRESETS",
     "MAX_CONTROL_RATE_HZ",
+    "MAX_FORCE_LIMIT_N",
     "MIN_CONTROL_RATE_HZ",
     "MIN_FORCE_LIMIT_N",
     "ForcePreset",
@@ -73,6 +74,8 @@ DEADMAN_MIN_PERIODS = 2
 #: noise. Limits near it are allowed (a limit below the held tissue's static load is warned about at
 #: grasp); the most delicate preset (nerve) is 0.4 N.
 MIN_FORCE_LIMIT_N = 0.01
+#: The largest force limit the filter takes [N].
+MAX_FORCE_LIMIT_N = 50.0
 #: Plausible joint-limit settings as multiples of the dVRK's move_jp limits of each joint: from
 #: ``low`` (slower than this never reaches a target) to ``high`` (faster than any arm can servo).
 _RATE_FACTORS: dict[str, tuple[float, float]] = {
@@ -308,7 +311,7 @@ class SafetyConfig:
         if self.tissue not in FORCE_PRESETS:
             raise UnknownVariantError("tissue", self.tissue, FORCE_PRESETS)
         if self.force_limit_n is not None:
-            _positive("force_limit_n", self.force_limit_n, 50.0, lower=MIN_FORCE_LIMIT_N)
+            _positive("force_limit_n", self.force_limit_n, MAX_FORCE_LIMIT_N, lower=MIN_FORCE_LIMIT_N)
         _positive("stiffness_min_n_per_m", self.stiffness_min_n_per_m, 1e5, lower=1.0)
         _positive("stiffness_max_n_per_m", self.stiffness_max_n_per_m, 1e5, lower=1.0)
         _positive("stiffness_prior_n_per_m", self.stiffness_prior_n_per_m, 1e5, lower=1.0)
@@ -320,8 +323,8 @@ class SafetyConfig:
             )
         if not (_is_number(self.stiffness_forgetting) and 0.5 < self.stiffness_forgetting <= 1.0):
             raise ConfigurationError("stiffness_forgetting", self.stiffness_forgetting, "a number in (0.5, 1]")
-        if not (_is_number(self.force_sensing_error_n) and 0.0 <= self.force_sensing_error_n <= 100.0):
-            raise ConfigurationError("force_sensing_error_n", self.force_sensing_error_n, "a number in [0, 100] N")
+        if not (_is_number(self.force_sensing_error_n) and 0.0 <= self.force_sensing_error_n <= 1000.0):
+            raise ConfigurationError("force_sensing_error_n", self.force_sensing_error_n, "a number in [0, 1000] N")
         _positive("tissue_stiffness_bound_n_per_m", self.tissue_stiffness_bound_n_per_m, 1e5, lower=1.0)
         if not (_is_number(self.held_load_bound_n) and 0.0 <= self.held_load_bound_n <= 50.0):
             raise ConfigurationError("held_load_bound_n", self.held_load_bound_n, "a number in [0, 50] N")

@@ -5,35 +5,28 @@ measured joint efforts ``tau`` (motor currents), with nothing subtracted for gra
 dynamics (sawIntuitiveResearchKit, ``mtsIntuitiveResearchKitArm.cpp``; the dVRK documentation calls it
 "a rough cartesian force emulation"). This module models those efforts as
 
-    tau = J^T [f; 0] + tau_gravity(q) + tau_coulomb(qd) + tau_viscous(qd) + tau_hysteresis + drift + noise
+    tau = J^T [f; 0] + tau_arm(q, qd, qdd) + residual
 
 with ``f`` the tissue's force on the tool and ``J`` the tool tip's 6x6 Jacobian (base axes), and returns
 the force part of ``pinv(J^T) tau``, as the console publishes it on ``body``/``spatial/measured_cf``.
 
-The terms and where their sizes come from (the parameters of :data:`SENSING_PRESETS`):
+``tau_arm`` is a real arm's free-space efforts, identified from its public logs
+(:mod:`sim.identified_arm`: inertia, Coriolis, link and instrument gravity with the counterweight, Coulomb
+and viscous friction, offsets), and ``residual`` what that identification left unexplained on a log it was
+not fitted on, drawn as a coloured noise per joint (an Ornstein-Uhlenbeck process with the residual's
+spread and correlation time). The accelerations come from the joint velocities' change between two
+measurements. On the public logs' fast excitation this reproduces the console's free-space error by
+insertion depth and tip speed (``tissue-retract bench sensing``; docs/force-sensing.md).
 
-* ``tau_gravity``: an instrument mass the console does not compensate, a point on the shaft
-  ``unbalanced_offset_m`` behind the tool tip. The Classic PSM's counterweight balances the arm's
-  links, not the instrument (Wang et al. 2019, arXiv 1902.10875, model the counterweight; their
-  identified instrument links weigh 0.36-0.5 kg); the console compensates no gravity on the Classic
-  PSM, and only from dVRK 2.4 on the Si (release notes, ``use_gravity_compensation``). We take 0.1 kg
-  of it unbalanced, 0.25 m behind the tip (about where an instrument's housing sits).
-* Coulomb and viscous friction per joint: the identification literature's friction terms (Wang et al.
-  2019; Yang et al. 2024, arXiv 2405.07453, who also model the trocar's friction on the shaft). Sizes
-  here: 0.04 N m on the outer yaw and pitch, 0.3 N on the insertion stage and cannula, 4 mN m on the
-  cable-driven wrist (about 0.4 N at the wrist's 9 mm lever).
-* The wrist cables' hysteresis: a Dahl model per wrist joint, +-3 mN m over 0.02 rad of travel.
-* A slowly drifting offset per joint (temperature, cable tension): an Ornstein-Uhlenbeck process with a
-  60 s time constant.
-* Current noise: white, per joint.
+Presets (:data:`SENSING_PRESETS`):
 
-What these add up to in free space, by :func:`error_bound_n`, is a few newtons in the worst pose and
-motion and about one newton typical: the published estimators that identify the arm's dynamics still
-report 2 N RMS (Wu, Yilmaz, Kazanzides, Tumerdem 2020, arXiv 2012.01479) or 3-5 % of range
-(Yang et al. 2024) after compensation, which the raw estimate is worse than. ``dvrk-calibrated`` is
-what is left after ``tissue-retract calibrate-wrench`` fits the gravity and friction terms: the
-hysteresis, drift and noise, and a tenth of the gravity and friction (the fit's error on a held-out
-trajectory; Yang et al. 2024 report 5-10 % of range for identified models).
+* ``dvrk``: the console's estimate: all of ``tau_arm`` and the residual;
+* ``dvrk-calibrated``: what ``tissue-retract calibrate-wrench`` leaves, measured on the public logs: its fit
+  removes ``tau_arm`` with the acceleration the chain commands (a deploy has no other: it reads single
+  ``measured_js`` messages), so what is left is the held-out residual and the inertia of the difference
+  between the arm's acceleration and the commanded one (none where the arm tracks the command, as the
+  simulated arm does without a tracking lag);
+* ``ideal``: the exact force.
 """
 
 from __future__ import annotations
@@ -49,8 +42,10 @@ import numpy as np
 from psm_control.errors import UnknownVariantError
 from psm_control.robot import PsmConfiguration, PsmModel
 from safety.config import SafetyConfig
+from sim.identified_arm import IdentifiedArm, identified_arm
 
 __all__ = [
+    "HELD_STILL_ERROR_N",
     "SENSING_NAMES",
     "SENSING_PRESETS",
     "ForceSensor",
@@ -62,93 +57,53 @@ __all__ = [
     "with_sensing",
 ]
 
-_GRAVITY_BASE_M_S2 = np.array([0.0, 0.0, -9.81])
-#: Speed over which Coulomb friction changes sign [rad/s or m/s] (a smooth sign: the efforts of a joint at
-#: rest are whatever holds it, somewhere inside the friction band).
-_COULOMB_SPEED = 0.01
 #: Pseudo-inverse cut-off of the console's ``pinv(J^T)``, relative to the largest singular value.
 _PINV_RCOND = 1e-4
+#: The identified arm of the dVRK presets.
+_ARM = "wpi-psm"
+#: Time constant of the accelerations the arm's inertia is computed from [s].
+_ACCELERATION_TIME_S = 0.02
 
 
 @dataclass(frozen=True)
 class SensingParams:
-    """One force-sensing model. Per-joint tuples are the six arm joints (N m or N for the insertion).
+    """One force-sensing model (see the module notes).
 
     Attributes:
         name: The preset's name.
-        unbalanced_mass_kg: Instrument mass the console does not compensate [kg].
-        unbalanced_offset_m: Its distance behind the tool tip along the shaft [m].
-        coulomb: Coulomb friction per joint.
-        viscous: Viscous friction per joint [per rad/s or m/s].
-        hysteresis: Half-width of each joint's hysteresis band (the wrist cables).
-        hysteresis_travel_rad: Travel over which the hysteresis saturates [rad].
-        drift: Stationary standard deviation of each joint's drifting offset.
-        drift_time_s: The drift's time constant [s].
-        noise: Standard deviation of each joint's current noise.
+        arm: The identified arm whose free-space efforts the console adds ("" none).
+        arm_terms: ``all`` of them (the console's estimate), or ``tracking``: the inertia of the arm's
+            acceleration less the commanded one (what a calibration given the commanded acceleration leaves).
+        residual: Whether the identification's held-out residual is drawn.
+        scale: Every error term times this (a sweep's ``force_sensing_scale``).
     """
 
     name: str
-    unbalanced_mass_kg: float = 0.0
-    unbalanced_offset_m: float = 0.25
-    coulomb: tuple[float, ...] = (0.0,) * 6
-    viscous: tuple[float, ...] = (0.0,) * 6
-    hysteresis: tuple[float, ...] = (0.0,) * 6
-    hysteresis_travel_rad: float = 0.02
-    drift: tuple[float, ...] = (0.0,) * 6
-    drift_time_s: float = 60.0
-    noise: tuple[float, ...] = (0.0,) * 6
+    arm: str = ""
+    arm_terms: str = "all"
+    residual: bool = False
+    scale: float = 1.0
 
     @property
     def exact(self) -> bool:
-        """The sensor reports the tissue force exactly (the ``ideal`` preset)."""
-        return not any(
-            [self.unbalanced_mass_kg, *self.coulomb, *self.viscous, *self.hysteresis, *self.drift, *self.noise]
-        )
+        """The sensor reports the tissue force exactly (the ``ideal`` preset, or any at scale 0)."""
+        return self.scale == 0.0 or not (self.arm or self.residual)
+
+    @property
+    def identified_arm(self) -> IdentifiedArm | None:
+        """The identified arm, or None."""
+        return identified_arm(self.arm) if self.arm else None
 
     def scaled(self, factor: float) -> SensingParams:
         """Every error term times ``factor`` (a sweep's ``force_sensing_scale``)."""
-        if factor == 1.0:
-            return self
+        return self if factor == 1.0 else dataclasses.replace(self, scale=factor * self.scale)
 
-        def times(values: tuple[float, ...]) -> tuple[float, ...]:
-            return tuple(factor * v for v in values)
-
-        return dataclasses.replace(
-            self,
-            unbalanced_mass_kg=factor * self.unbalanced_mass_kg,
-            coulomb=times(self.coulomb),
-            viscous=times(self.viscous),
-            hysteresis=times(self.hysteresis),
-            drift=times(self.drift),
-            noise=times(self.noise),
-        )
-
-
-_UNCOMPENSATED = SensingParams(
-    name="dvrk",
-    unbalanced_mass_kg=0.1,
-    unbalanced_offset_m=0.25,
-    coulomb=(0.04, 0.04, 0.3, 0.004, 0.004, 0.004),
-    viscous=(0.02, 0.02, 1.0, 0.001, 0.001, 0.001),
-    hysteresis=(0.0, 0.0, 0.0, 0.003, 0.003, 0.003),
-    drift=(0.005, 0.005, 0.05, 0.0005, 0.0005, 0.0005),
-    noise=(0.002, 0.002, 0.02, 0.0003, 0.0003, 0.0003),
-)
-
-#: The calibration leaves a tenth of the gravity and friction (its held-out error), and all of the rest.
-_CALIBRATED_RESIDUAL = 0.1
 
 #: The force-sensing presets, by name (``--force-sensing``, ``sim-dvrk --wrench``).
 SENSING_PRESETS: dict[str, SensingParams] = {
     "ideal": SensingParams(name="ideal"),
-    "dvrk": _UNCOMPENSATED,
-    "dvrk-calibrated": dataclasses.replace(
-        _UNCOMPENSATED,
-        name="dvrk-calibrated",
-        unbalanced_mass_kg=_CALIBRATED_RESIDUAL * _UNCOMPENSATED.unbalanced_mass_kg,
-        coulomb=tuple(_CALIBRATED_RESIDUAL * v for v in _UNCOMPENSATED.coulomb),
-        viscous=tuple(_CALIBRATED_RESIDUAL * v for v in _UNCOMPENSATED.viscous),
-    ),
+    "dvrk": SensingParams(name="dvrk", arm=_ARM, arm_terms="all", residual=True),
+    "dvrk-calibrated": SensingParams(name="dvrk-calibrated", arm=_ARM, arm_terms="tracking", residual=True),
 }
 #: The presets' names, in the order ``--help`` lists them.
 SENSING_NAMES = tuple(SENSING_PRESETS)
@@ -170,97 +125,112 @@ def console_force(jacobian: np.ndarray, efforts: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.pinv(jacobian.T, rcond=_PINV_RCOND)[:3] @ efforts)
 
 
-def _gravity_efforts(params: SensingParams, jacobian: np.ndarray, insertion_m: float) -> np.ndarray:
-    """Efforts that hold the unbalanced instrument mass against gravity (6,).
-
-    The mass sits on the shaft, ``unbalanced_offset_m`` behind the tip: the insertion joint's column of
-    the tip's Jacobian is the shaft's direction ``s``, and the outer joints swing the point at
-    ``(insertion - offset) s`` about the RCM with their angular columns ``w_i``: ``w_i x s`` per unit length.
-    """
-    if params.unbalanced_mass_kg == 0.0:
-        return np.zeros(6)
-    weight = params.unbalanced_mass_kg * _GRAVITY_BASE_M_S2
-    shaft = jacobian[:3, 2]
-    lever = insertion_m - params.unbalanced_offset_m
-    efforts = np.zeros(6)
-    for joint in (0, 1):
-        efforts[joint] = -lever * float(np.cross(jacobian[3:, joint], shaft) @ weight)
-    efforts[2] = -float(shaft @ weight)
-    return efforts
-
-
 class ForceSensor:
     """The console's force estimate from simulated joint efforts, tick by tick (see the module notes).
 
     Args:
         params: The sensing model.
-        rng: The generator of the noise and the drift (seeded by the caller, per episode).
+        rng: The generator of the residual (seeded by the caller, per episode).
     """
 
     def __init__(self, params: SensingParams, rng: np.random.Generator | None = None) -> None:
         self.params = params
-        self._coulomb = np.asarray(params.coulomb, dtype=float)
-        self._viscous = np.asarray(params.viscous, dtype=float)
-        self._hysteresis = np.asarray(params.hysteresis, dtype=float)
-        self._drift_std = np.asarray(params.drift, dtype=float)
-        self._noise = np.asarray(params.noise, dtype=float)
+        arm = params.identified_arm
+        self._arm = arm
+        self._residual_std = (
+            params.scale * np.asarray(arm.residual) if arm is not None and params.residual else np.zeros(6)
+        )
+        self._residual_time_s = arm.residual_time_s if arm is not None else 1.0
         self.reset(rng if rng is not None else np.random.default_rng(0))
 
     def reset(self, rng: np.random.Generator) -> None:
-        """A new episode: a fresh drift (drawn from its stationary spread) and hysteresis state."""
+        """A new episode: a fresh residual (drawn from its stationary spread), no earlier velocity."""
         self._rng = rng
-        self._drift = self._drift_std * rng.standard_normal(6)
-        self._dahl = np.zeros(6)
-        self._last_q: np.ndarray | None = None
+        self._residual = self._residual_std * rng.standard_normal(6)
+        self._last_qd: np.ndarray | None = None
+        self._last_commanded_qd: np.ndarray | None = None
+        self._qdd, self._commanded_qdd = np.zeros(6), np.zeros(6)
 
-    def efforts(self, configuration: PsmConfiguration, qd: np.ndarray, force_n: np.ndarray, dt_s: float) -> np.ndarray:
+    def arm_efforts(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, commanded_qdd: np.ndarray) -> np.ndarray:
+        """The identified arm's part of the efforts (6,): all of it, or the inertia of the tracking error
+        (``arm_terms``)."""
+        if self._arm is None:
+            return np.zeros(6)
+        if self.params.arm_terms == "tracking":
+            return self.params.scale * self._arm.inertial_efforts(q, qdd - commanded_qdd)
+        return self.params.scale * self._arm.efforts(q, qd, qdd)
+
+    def efforts(
+        self,
+        configuration: PsmConfiguration,
+        qd: np.ndarray,
+        force_n: np.ndarray,
+        dt_s: float,
+        commanded_qd: np.ndarray | None = None,
+    ) -> np.ndarray:
         """The measured joint efforts (6,) with the tissue's force on the tool ``force_n`` (base axes) [N].
 
         Args:
             configuration: The arm at its measured joints (base frame set).
             qd: Joint velocities (6,).
             force_n: The tissue's force on the tool (3,) [N], base axes.
-            dt_s: Time since the last call [s] (the drift and the hysteresis advance by it).
+            dt_s: Time since the last call [s] (the accelerations and the residual advance by it).
+            commanded_qd: The joint velocities the chain commanded (6,); None: the measured ones.
         """
         jacobian = configuration.base_jacobian()
         efforts = jacobian[:3].T @ np.asarray(force_n, dtype=float)
         if self.params.exact:
             return np.asarray(efforts)
-        p = self.params
         qd = np.asarray(qd, dtype=float)
-        q = configuration.q
-        efforts = efforts + _gravity_efforts(p, jacobian, float(q[2]))
-        efforts += self._coulomb * np.tanh(qd / _COULOMB_SPEED) + self._viscous * qd
-        if self._last_q is not None and np.any(self._hysteresis):
-            step = q - self._last_q  # Dahl: the band's state follows the travel, saturating at +-1
-            self._dahl = np.clip(
-                self._dahl + step / p.hysteresis_travel_rad * (1.0 - self._dahl * np.sign(step)), -1, 1
-            )
-        self._last_q = q.copy()
-        efforts += self._hysteresis * self._dahl
-        if dt_s > 0.0 and np.any(self._drift_std):
-            decay = math.exp(-dt_s / p.drift_time_s)
-            self._drift = decay * self._drift + self._drift_std * math.sqrt(
+        commanded = qd if commanded_qd is None else np.asarray(commanded_qd, dtype=float)
+        if self._last_qd is not None and self._last_commanded_qd is not None and dt_s > 0.0:
+            # The arm's and the chain's mean accelerations over the tick, smoothed as the arm's mass and servo
+            # smooth a velocity that steps (a console that differences set-points arriving between its ticks).
+            blend = dt_s / (_ACCELERATION_TIME_S + dt_s)
+            self._qdd += blend * ((qd - self._last_qd) / dt_s - self._qdd)
+            self._commanded_qdd += blend * ((commanded - self._last_commanded_qd) / dt_s - self._commanded_qdd)
+        self._last_qd, self._last_commanded_qd = qd.copy(), commanded.copy()
+        efforts = efforts + self.arm_efforts(configuration.q, qd, self._qdd, self._commanded_qdd)
+        if dt_s > 0.0 and np.any(self._residual_std):
+            decay = math.exp(-dt_s / self._residual_time_s)
+            self._residual = decay * self._residual + self._residual_std * math.sqrt(
                 1.0 - decay * decay
             ) * self._rng.standard_normal(6)
-        efforts += self._drift + self._noise * self._rng.standard_normal(6)
-        return np.asarray(efforts)
+        return np.asarray(efforts + self._residual)
 
-    def measure(self, configuration: PsmConfiguration, qd: np.ndarray, force_n: np.ndarray, dt_s: float) -> np.ndarray:
+    def measure(
+        self,
+        configuration: PsmConfiguration,
+        qd: np.ndarray,
+        force_n: np.ndarray,
+        dt_s: float,
+        commanded_qd: np.ndarray | None = None,
+    ) -> np.ndarray:
         """The force the console reports (3,) [N], base axes: the force part of ``pinv(J^T) efforts``."""
         if self.params.exact:
             return np.asarray(force_n, dtype=float).copy()
-        return console_force(configuration.base_jacobian(), self.efforts(configuration, qd, force_n, dt_s))
+        efforts = self.efforts(configuration, qd, force_n, dt_s, commanded_qd)
+        return console_force(configuration.base_jacobian(), efforts)
 
 
-#: Joint speeds up to which the bound is drawn [rad/s, m/s]: above what the tasks' motions reach.
-_BOUND_SPEEDS = np.array([1.0, 1.0, 0.1, 3.0, 3.0, 3.0])
+#: The largest calibrated free-space error measured on a real PSM held still [N]: radiang's arm calibrated on its
+#: two slow trajectories, checked on its static holds (``tissue-retract calibrate-wrench --from
+#: Data250_6.21.2017 Data_Pos_6.19.2017 --held-out DataHold_6.8.2017``: 5.77 N at most, 2.34 N RMS, 40 of its
+#: samples at 5-8 cm insertion). At rest a joint's friction is anywhere in its band, which no fit of motion
+#: removes; the identified arm's residual, measured moving, does not cover it.
+HELD_STILL_ERROR_N = 5.77
+#: A calibration's bound over its largest held-out error (``calibrate-wrench``'s margin).
+_CALIBRATION_MARGIN = 1.25
 #: The bound is the largest error drawn, times this.
 _BOUND_MARGIN = 1.1
+#: The residual's edge in the bound's draws, in standard deviations.
+_RESIDUAL_EDGE = 3.0
 
 
 @functools.cache
-def _bound(params: SensingParams, samples: int, seed: int) -> float:
+def _bound(
+    params: SensingParams, velocity: tuple[float, ...], acceleration: tuple[float, ...], samples: int, seed: int
+) -> float:
     model = PsmModel()
     configuration = model.configuration()
     rng = np.random.default_rng(seed)
@@ -269,32 +239,48 @@ def _bound(params: SensingParams, samples: int, seed: int) -> float:
     lower[2], upper[2] = 0.05, 0.2  # the workspace box's insertion range
     lower[3:], upper[3:] = np.maximum(lower[3:], -1.2), np.minimum(upper[3:], 1.2)
     sensor = ForceSensor(params, rng)
+    speed, accel = np.asarray(velocity), np.asarray(acceleration)
     worst = 0.0
     for _ in range(samples):
         q = rng.uniform(lower, upper)
         configuration.update(q)
-        sensor.reset(rng)
-        # The hysteresis and the drift at the edges of their bands, in random directions.
-        sensor._dahl = rng.choice([-1.0, 1.0], 6)
-        sensor._drift = 3.0 * sensor._drift_std * rng.choice([-1.0, 1.0], 6)
-        sensor._last_q = q
-        qd = rng.uniform(-_BOUND_SPEEDS, _BOUND_SPEEDS)
-        worst = max(worst, float(np.linalg.norm(sensor.measure(configuration, qd, np.zeros(3), 0.0))))
+        qd = rng.uniform(-speed, speed)
+        # The inertia is linear in the acceleration: its largest lies on a corner of the limits' box.
+        qdd = accel * rng.choice([-1.0, 1.0], 6)
+        residual = _RESIDUAL_EDGE * sensor._residual_std * rng.choice([-1.0, 1.0], 6)
+        efforts = sensor.arm_efforts(q, qd, qdd, np.zeros(6)) + residual
+        worst = max(worst, float(np.linalg.norm(console_force(configuration.base_jacobian(), efforts))))
     return _BOUND_MARGIN * worst
 
 
-def error_bound_n(params: SensingParams, *, samples: int = 2000, seed: int = 0) -> float:
-    """How far the sensed force can be from the true one [N], by the model (0 for ``ideal``).
+def error_bound_n(
+    params: SensingParams, config: SafetyConfig | None = None, *, samples: int = 2000, seed: int = 0
+) -> float:
+    """How far the sensed force can be from the true one [N] (0 for ``ideal``).
 
-    The largest free-space error of ``samples`` draws, plus 10 %: poses in the workspace box's insertion
-    range (5-20 cm) with the wrist within +-1.2 rad, joint speeds up to :data:`_BOUND_SPEEDS`, the
-    hysteresis and the drift at the edges of their bands (three standard deviations) in random
-    directions, and the current noise. The tissue's force adds exactly (the console's ``pinv(J^T)``
+    The console's estimate (``arm_terms`` ``all``): the largest free-space error of ``samples`` draws, plus
+    10 %: poses in the workspace box's insertion range (5-20 cm) with the wrist within +-1.2 rad, joint speeds
+    within the chain's velocity limits and accelerations at its acceleration limits (``config``'s; the
+    default chain's when None), the residual at three standard deviations in random directions. The chain's
+    limits are what a retraction can reach, so they decide the bound; its inertial part, most of it, is
+    proportional to the acceleration limits. The tissue's force adds exactly (the console's ``pinv(J^T)``
     undoes ``J^T``), so the free-space error is the error at any load.
+
+    The calibrated estimate (``tracking``): 1.25 x the largest error a calibration left on a held-out real log
+    at retraction speeds, as ``calibrate-wrench`` bounds its own fit: the identified arm's
+    :attr:`~sim.identified_arm.IdentifiedArm.residual_bound_n` (its own held-out log, moving), or
+    :data:`HELD_STILL_ERROR_N` (another arm held still) when larger. It holds while the arm tracks the chain's
+    commanded acceleration; the inertia of a tracking error is not in it.
     """
     if params.exact:
         return 0.0
-    return _bound(params, samples, seed)
+    arm = params.identified_arm
+    if params.arm_terms == "tracking" and arm is not None:
+        return params.scale * max(arm.residual_bound_n, _CALIBRATION_MARGIN * HELD_STILL_ERROR_N)
+    config = config if config is not None else SafetyConfig()
+    velocity = tuple(float(v) for v in config.velocity)
+    acceleration = tuple(float(a) for a in config.acceleration)
+    return _bound(params, velocity, acceleration, samples, seed)
 
 
 #: The travel bound's stiffness over ``E t`` (:mod:`safety.force_bound`). Measured: the tasks' expert

@@ -49,6 +49,8 @@ class IdentifiedArm:
             (6,) [N m, N for the insertion].
         residual_time_s: The residual's correlation time (its autocorrelation's 1/e lag, the median over
             the joints) [s].
+        residual_bound_n: 1.25 x the largest force error the identification left on the held-out log at
+            retraction speeds (tool tip at most 0.1 m/s) [N]: what a calibration of this arm is trusted to.
         provenance: Where the numbers come from: the command, the logs fitted and held out, the figures.
     """
 
@@ -57,6 +59,7 @@ class IdentifiedArm:
     parameters: tuple[float, ...]
     residual: tuple[float, ...]
     residual_time_s: float
+    residual_bound_n: float
     provenance: str
 
     @functools.cached_property
@@ -89,6 +92,7 @@ class IdentifiedArm:
             "parameters": list(self.parameters),
             "residual": list(self.residual),
             "residual_time_s": self.residual_time_s,
+            "residual_bound_n": self.residual_bound_n,
             "provenance": self.provenance,
         }
 
@@ -101,6 +105,7 @@ class IdentifiedArm:
             parameters=tuple(float(v) for v in data["parameters"]),
             residual=tuple(float(v) for v in data["residual"]),
             residual_time_s=float(data["residual_time_s"]),
+            residual_bound_n=float(data["residual_bound_n"]),
             provenance=str(data["provenance"]),
         )
 

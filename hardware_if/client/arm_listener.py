@@ -81,6 +81,9 @@ class ArmListener(Node):
         self._force_body_n = np.zeros(3)
         self._calibration: WrenchCalibration | None = None
         self._calibration_configuration = PsmModel().configuration()
+        # The acceleration of the last command sent (the chain's), given to the calibration: the arm tracks it,
+        # and a single measured_js carries none.
+        self._commanded_qdd: np.ndarray | None = None
         self._poses: dict[str, np.ndarray] = {}
         self._frame_ids: dict[str, str] = {}
         self._state = OperatingState()
@@ -261,7 +264,7 @@ class ArmListener(Node):
         local.update(convert.joint_state_positions(message))
         with np.errstate(all="ignore"):  # a force that overflows is a sensing fault, said by measure()
             force_local = self._calibration.force(
-                local, convert.joint_state_velocities(message), np.asarray(message.effort)
+                local, convert.joint_state_velocities(message), np.asarray(message.effort), self._commanded_qdd
             )
             return np.asarray(rotation @ local.local_pose()[:3, :3].T @ force_local)
 

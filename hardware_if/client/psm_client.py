@@ -214,6 +214,7 @@ class PsmClient(ArmListener):
         return status
 
     def _send_hold(self) -> None:
+        self._commanded_qdd = np.zeros(6)  # a hold is a set-point at rest
         if self._hold_q is not None:
             self._command_publisher("servo_jp").publish(
                 convert.joint_state(JOINT_NAMES, self._hold_q, stamp_s=self._now_s())
@@ -248,6 +249,7 @@ class PsmClient(ArmListener):
                 self._send_hold()
                 return
             stamp = self._now_s()
+            self._commanded_qdd = np.asarray(command.qdd, dtype=float).copy()
             self._command_publisher("servo_jp").publish(convert.joint_state(JOINT_NAMES, command.q, stamp_s=stamp))
             self._command_publisher("jaw/servo_jp").publish(
                 convert.joint_state((JAW_JOINT_NAME,), [command.jaw], stamp_s=stamp)

@@ -301,7 +301,7 @@ class ConsoleArm(Node):
             self.state.is_homed = True
             self._event("status", f"{self.topics.arm}: homed")
         self._sample = self.arm_model.step(dt)
-        self._sense(dt)
+        self._sense(dt if self._sample.elapsed_s is None else self._sample.elapsed_s)
         if self._mode == "free":
             self._servo(self._sample.q, self._sample.jaw)  # nothing holds the arm: the set-point follows it
         # A servo command answered since the last tick already sent measured_js and setpoint_js: a stream

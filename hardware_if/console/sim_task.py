@@ -30,7 +30,7 @@ import numpy as np
 import sim.envs
 from hardware_if.common.crtk import periodic_qos
 from hardware_if.common.task_topics import task_topic
-from hardware_if.console.arm_model import ArmSample
+from hardware_if.console.arm_model import ArmSample, WindowedVelocity
 from hardware_if.console.endoscope_stream import EndoscopeStream, SceneState
 from hardware_if.console.motion import inverse_kinematics
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
@@ -124,6 +124,7 @@ class TaskArm:
         self.env.controller, self.env.controller_name = self.follower, "sim-dvrk set-point follower"
         self._debt_s = 0.0
         self._qd = np.zeros(6)
+        self._velocity = WindowedVelocity()
         self.episode_seed = seed
         self._info: dict[str, Any] = {}
         self._achieved = np.zeros(3)
@@ -158,6 +159,7 @@ class TaskArm:
             self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
             self._info = {**self._info, "grasped": False}
             self._debt_s, self._qd = 0.0, np.zeros(6)
+            self._velocity.reset(self.env.backend.q)
             self._rest_nodes, self._still_steps, self._asleep = None, 0, False
             self._held = self._sample()
             self._state, self._markers = self._read_task_state(), self._read_scene_markers()
@@ -272,6 +274,7 @@ class TaskArm:
         with self._scene_lock:
             self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
             self._qd = np.zeros(6)
+            self._velocity.reset(self.env.backend.q)
             self._held = self._sample()
             return self._held
 
@@ -286,7 +289,7 @@ class TaskArm:
         During a scene reset the arm is returned as it was and no simulated time passes.
         """
         if not self._scene_lock.acquire(blocking=False):
-            return self._held
+            return self._held._replace(elapsed_s=0.0)
         try:
             self._held = self._step(dt_s)
             return self._held
@@ -296,10 +299,10 @@ class TaskArm:
     def _step(self, dt_s: float) -> ArmSample:
         if self._at_rest():  # a still scene is not stepped, but the endoscope keeps filming it
             self._debt_s, self._qd = 0.0, np.zeros(6)
+            self._velocity.reset(self.env.backend.q)
             self._offer_frame()
-            return self._held
+            return self._held._replace(qd=self._qd.copy(), elapsed_s=0.0)
         self._debt_s += max(dt_s, 0.0)
-        before = np.asarray(self.env.backend.q, dtype=float).copy()
         steps = 0
         while self._debt_s >= self.step_s and steps < self.max_steps_per_call:
             observation, _, _, _, self._info = self.env.step(np.zeros(5))
@@ -310,7 +313,7 @@ class TaskArm:
         if steps == self.max_steps_per_call:
             self._debt_s = min(self._debt_s, self.step_s)  # behind the wall clock: slow down, do not pile up
         if steps:
-            self._qd = (np.asarray(self.env.backend.q, dtype=float) - before) / (steps * self.step_s)
+            self._qd = self._velocity.advance(self.env.backend.q, steps * self.step_s)
         self._offer_frame()
         return self._sample(steps * self.step_s)
 
@@ -354,7 +357,7 @@ class TaskArm:
             effort = -grasp.pinch_force_n * JAW_LEVER_M if holding else 0.0
         self._jaw = jaw
         q = np.asarray(backend.q, dtype=float).copy()
-        return ArmSample(q, self._qd.copy(), jaw, force, velocity, effort)
+        return ArmSample(q, self._qd.copy(), jaw, force, velocity, effort, elapsed_s=dt_s)
 
     def close(self) -> None:
         """Release the physics client (after a reset that is running)."""

@@ -13,9 +13,10 @@ Layouts read by :func:`read_joint_log`:
   tau[14:21]``, the wrist's two joints and the jaw in motor space: undone here with the large needle
   driver's coupling (positions ``q_joint = C q_motor``, efforts ``tau_joint = C^-T tau_motor``).
 * **radiang/dvrk_parameter_identification**: a folder with ``data_position.csv``, ``data_velocity.csv`` and
-  ``data_torque.csv`` (seven columns each, six joints and the jaw, joint space), or a 9-column
-  ``*_results.csv`` of its three-joint scripts (``q, qd, effort`` of yaw, pitch, insertion, 200 Hz). Its
-  files carry no time: the rate is 250 Hz for a folder whose name says ``250``, else 200 Hz, or ``rate_hz``.
+  ``data_torque.csv`` (seven columns each, six joints and the jaw, joint space; a file with an eighth, leading
+  column has the sample time in it), or a 9-column
+  ``*_results.csv`` of its three-joint scripts (``q, qd, effort`` of yaw, pitch, insertion, 200 Hz). Files
+  without a time column: the rate is 250 Hz for a folder whose name says ``250``, else 200 Hz, or ``rate_hz``.
 
 Bad logs raise a :class:`JointLogError` subclass that names the file and what is wrong.
 """
@@ -182,10 +183,13 @@ def _read_csv(path: Path, rate_hz: float | None) -> JointLog:
 def _read_radiang_folder(path: Path, rate_hz: float | None) -> JointLog:
     parts = [_load_csv(path / f"data_{name}.csv") for name in ("position", "velocity", "torque")]
     n = min(len(p) for p in parts)
+    times = [p[:n, 0] for p in parts if p.shape[1] == 8 and np.all(np.diff(p[:n, 0]) > 0.0)]
+    # Some of its folders (Data_Pos_6.19.2017) lead a file with the sample time [s]: seven joints after it.
+    parts = [p[:, 1:] if p.shape[1] == 8 else p for p in parts]
     if any(p.shape[1] < 6 for p in parts):
         raise LogLayoutError(path, "data_position/velocity/torque.csv with six joint columns at least")
     q, qd, tau = (p[:n, :6] for p in parts)
-    t_s = np.arange(n) / _rate(path, rate_hz)
+    t_s = times[0] if times and rate_hz is None else np.arange(n) / _rate(path, rate_hz)
     return _checked(JointLog(str(path), "radiang", t_s, q, qd, tau))
 
 

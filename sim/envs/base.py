@@ -134,6 +134,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.controller_name = ""
         self._joint_offset: np.ndarray | None = None
         self._base_error: np.ndarray | None = None
+        self._commanded_qd: np.ndarray | None = None
 
     def use_randomization(self, ranges: dict[str, tuple[float, float]], log_uniform: Iterable[str] = ()) -> None:
         """Draw the next episodes from these ranges (over the configured ones; ``log_uniform`` names those drawn
@@ -152,9 +153,8 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         The controller is rebuilt at the next reset: its filter trusts the force to the sensing's error bound.
         """
         self.sensing = sensing_params(name)
-        self.safety_config = with_sensing(
-            self.config.safety_config or SafetyConfig(), error_bound_n(self.sensing), self.randomizer.ranges
-        )
+        config = self.config.safety_config or SafetyConfig()
+        self.safety_config = with_sensing(config, error_bound_n(self.sensing, config), self.randomizer.ranges)
         self.controller = None
 
     # ----------------------------------------------------------------- task hooks
@@ -245,6 +245,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._force = np.zeros(3)
         self._sensed_force = np.zeros(3)
         self._sensed_peak = 0.0
+        self._commanded_qd = None  # the chain's last command's velocities (the sensing's acceleration)
         self._force_over_travel_bound: float | None = None
         self._strain = 0.0
         self._holding_steps = 0
@@ -279,6 +280,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             interventions.update(output.interventions)
             self._controller_events.extend(output.events)
             self.backend.servo_jp(output.command)
+            self._commanded_qd = output.command.qd
             count = min(per_tick, physics.substeps - done)
             if self.backend.lagging:  # the arm moves during the substeps, so step them one by one
                 for _ in range(count):
@@ -441,7 +443,7 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         configuration = self.scene.configuration
         configuration.update(measured_q, self.backend.jaw)
         self._sensed_force = self.sensor.measure(
-            configuration, self.backend.qd, self._force, self.controller.control_period_s
+            configuration, self.backend.qd, self._force, self.controller.control_period_s, self._commanded_qd
         )
         self._sensed_peak = max(self._sensed_peak, float(np.linalg.norm(self._sensed_force)))
         self.backend.force_n = self._sensed_force

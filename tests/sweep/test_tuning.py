@@ -128,8 +128,9 @@ def test_tune_safety_never_writes_a_limit_above_the_bound(tmp_path: Path) -> Non
 
 
 def test_limits_below_the_sensing_bound_are_said_at_start_and_in_the_verdict(tmp_path: Path) -> None:
-    """With the console's uncalibrated force (8.89 N bound) every swept limit is below what it can tell: a start
-    warning, recorded in summary.json and the report, and no recommendation, saying why and what to change."""
+    """With the console's uncalibrated force (its bound above any force limit the filter takes) every swept limit
+    is below what it can tell: a start warning, recorded in summary.json and the report, and no recommendation,
+    saying why and what to change (calibrate: no limit could be raised above the bound)."""
     result = run_cli(
         "tune-safety", "--policy", "scripted", "--task", "lift", "--grid", "force_limit_n=0.5:1", "--levels", "2",
         "--episodes", "2", "--jobs", "2", "--max-force-n", "1.5", "--force-sensing", "dvrk", "--out", str(tmp_path),
@@ -139,7 +140,7 @@ def test_limits_below_the_sensing_bound_are_said_at_start_and_in_the_verdict(tmp
     stderr, stdout = " ".join(result.stderr.split()), " ".join(result.stdout.split())
     assert "WARNING: 2 of 2 force limits swept (0.5, 1 N) are below the force sensing's error bound" in stderr
     assert "Nothing recommended" in stdout and "Why: the policy succeeded in no episode" in stdout
-    assert "calibrate the force sensing" in stdout and "Raise --max-force-n above 8.89 N" in stdout
+    assert "calibrate the force sensing" in stdout and "No force limit the safety filter takes (50 N at most)" in stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["force_sensing"] == "dvrk" and summary["force_sensing_error_n"] > 1.0
     assert any("below the force sensing's error bound" in w for w in summary["warnings"])

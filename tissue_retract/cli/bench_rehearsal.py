@@ -237,7 +237,7 @@ def _timing(record: Path) -> dict[str, list[Any]]:
         elif topic == "/deploy/measured" and payload.get("stamp_s") is not None:
             ages.append(t - float(payload["stamp_s"]))
         elif topic == "/deploy/event" and payload.get("kind") == "hold":
-            holds.append(str(payload.get("reason", "")))
+            holds.append(str(payload.get("text", "")))  # the hold event says why in its text
     return {"step_period_s": steps, "measured_age_s": ages, "holds": holds}
 
 

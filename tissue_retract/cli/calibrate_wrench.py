@@ -118,8 +118,11 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
                 math.sin(2 * math.pi * frequencies[3] * later) - math.sin(2 * math.pi * frequencies[3] * t)
             )
             local.update(measured.q)
-            tip = local.local_pose()[:3, 3]
-            chain.set_target(CartesianDelta(start + _AMPLITUDE_M * wave - tip, yaw, 0.0, "local"), measured)
+            step = start + _AMPLITUDE_M * wave - local.local_pose()[:3, 3]
+            # An arm that fell behind (a slow console) is led back to the wave, within what the chain accepts.
+            reach = 0.5 * chain.config.max_translation_m
+            step *= min(1.0, reach / max(float(np.linalg.norm(step)), 1e-12))
+            chain.set_target(CartesianDelta(step, yaw, 0.0, "local"), measured)
         output = chain.tick(measured)
         if output.safety_stop:
             raise RuntimeError(f"the control chain stopped the excitation: {output.reason}")

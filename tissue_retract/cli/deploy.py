@@ -191,7 +191,8 @@ def run(args: argparse.Namespace) -> int:
         # Refused here, before the recording is opened: another arm's, a bound its own fit contradicts, one
         # fitted on exact forces (see read_calibration).
         calibration = read_calibration(args.wrench_calibration, args.arm)
-        sensing_error_n = calibration.error_bound_n
+        # The deploy gives the calibration the chain's commanded acceleration: the bound fitted with one.
+        sensing_error_n = calibration.error_bound_with_acceleration_n
         sensing_source = (
             f"dvrk measured_js efforts, calibrated by {args.wrench_calibration} (fitted on {calibration.origin})"
         )
@@ -236,10 +237,12 @@ def run(args: argparse.Namespace) -> int:
     announce(texture_warning(load_perception(args.perception), options.texture))
     if args.target == "dvrk":
         bound = (
-            "its error_bound_n"
+            "its error_bound_with_acceleration_n: the calibration is given the chain's commanded acceleration, "
+            "and the bound holds while the arm tracks it"
             if calibration is not None
-            else "the dvrk sensing model's error bound; a real PSM's free-space error is several times the "
-            "model's (tissue-retract bench sensing on its logs): on a robot, calibrate-wrench first"
+            else "the dvrk sensing model's error bound: a real PSM's identified free-space efforts at the chain's "
+            "acceleration limits, mostly the arm's inertia; the force limit is kept from the travel: on a robot, "
+            "calibrate-wrench first"
         )
         print(
             f"force sensing: {sensing_source}; the filter trusts the force to {sensing_error_n:.3g} N ({bound})",

@@ -140,7 +140,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="train over these ranges, as robustness's --vary takes them (NAME=LOW:HIGH, NAME=LOW:HIGHx times "
         "nominal, NAME=VALUE; the same names): each episode draws its tissue, noise, latency and "
         "disturbances from them, the demonstrations' and evaluations' too, e.g. "
-        "stiffness=0.3:3x,obs_noise=0:0.002,latency=0:3",
+        "stiffness=0.3:3x,obs_noise=0:0.002,latency=0:3 (with --robust, --vary '' keeps the task's own ranges)",
     )
 
 
@@ -325,8 +325,8 @@ def _rebuild(args: argparse.Namespace) -> str:
         parts += ["--blind", "--registration-error-mm", f"{args.registration_error_mm:g}"]
     if args.force_sensing != "ideal":
         parts += ["--force-sensing", args.force_sensing]
-    if args.vary:
-        parts += ["--vary", args.vary]
+    if args.vary or (args.vary == "" and getattr(args, "robust", False)):
+        parts += ["--vary", args.vary]  # an empty --vary is what keeps --robust on the task's own ranges
     if args.perception is not None:
         parts += ["--perception", args.perception]
     if args.budget_s is not None:

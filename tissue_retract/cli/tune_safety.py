@@ -20,7 +20,7 @@ from rich.table import Table
 
 from psm_control import __version__
 from psm_control.errors import ConfigurationError
-from safety.config import SafetyConfig
+from safety.config import MAX_FORCE_LIMIT_N, SafetyConfig
 from sim.envs import gym_id
 from sim.force_sensing import error_bound_n, sensing_params
 from sim.strict_json import write_strict_json
@@ -156,11 +156,15 @@ def _nothing_recommended(
                 if sensing == "dvrk-calibrated"
                 else "calibrate the force sensing (calibrate-wrench; --force-sensing dvrk-calibrated here)"
             )
+            raise_limit = (
+                f"Raise --max-force-n above {sensing_error_n:.2f} N if the tissue allows it, or {better}"
+                if sensing_error_n < MAX_FORCE_LIMIT_N
+                else f"No force limit the safety filter takes ({MAX_FORCE_LIMIT_N:g} N at most) is above it: " + better
+            )
             why += (
                 f"; every one of those limits is below the force sensing's error bound {sensing_error_n:.2f} N "
                 f"({sensing}): the filter cannot tell the limit from the measured force and stops each retraction "
-                f"at the grasp's travel bound. Raise --max-force-n above {sensing_error_n:.2f} N if the tissue "
-                f"allows it, or {better}"
+                f"at the grasp's travel bound. {raise_limit}"
             )
         return why
     return f"no setting with a force limit <= {bound:g} N kept its largest observed peak force under {bound:g} N"

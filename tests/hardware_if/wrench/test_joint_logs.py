@@ -113,6 +113,28 @@ def test_the_wpi_layout_undoes_the_instrument_coupling(tmp_path: Path) -> None:
     np.testing.assert_allclose(power_motor, power_joint)
 
 
+def test_a_radiang_folder_takes_its_time_column(tmp_path: Path) -> None:
+    """A radiang folder whose torque file leads with the sample time (its Data_Pos layout) reads the joints after
+    it, at that time; one without reads at the rate its name implies."""
+    q, qd, effort = _samples(40)
+    jaw = np.zeros((40, 1))
+    t_s = 0.004 * np.arange(1, 41)
+    for folder, timed in (("Data_Pos", True), ("Data250", False)):
+        (tmp_path / folder).mkdir()
+        torque = np.hstack([effort, jaw])
+        np.savetxt(tmp_path / folder / "data_position.csv", np.hstack([q, jaw]), delimiter=",")
+        np.savetxt(tmp_path / folder / "data_velocity.csv", np.hstack([qd, jaw]), delimiter=",")
+        np.savetxt(
+            tmp_path / folder / "data_torque.csv", np.hstack([t_s[:, None], torque]) if timed else torque, delimiter=","
+        )
+        log = read_joint_log(tmp_path / folder)
+        assert log.layout == "radiang" and log.rate_hz == pytest.approx(250.0)
+        np.testing.assert_allclose(log.effort, effort)
+        np.testing.assert_allclose(log.q, q)
+        if timed:
+            np.testing.assert_allclose(log.t_s, t_s)
+
+
 def test_a_written_joint_bag_reads_back_log_after_log(tmp_path: Path) -> None:
     """write_joint_bag keeps every sample of each log, in order, under /ARM/measured_js, one second apart."""
     q, qd, effort = _samples()
