@@ -6,10 +6,10 @@
 selects the shipped policy of the task being run, in the variant that fits what the run observes:
 
 * **by force sensing.** The tissue force is part of a policy's observation, and a policy trained on the
-  exact force fails on the force a dVRK senses (its console's estimate is off by about a newton in free
-  space: measured, 0 of 100 episodes). The policies trained on the exact force are at the top of
-  ``policies/pretrained/``, the ones trained on a preset's sensed force (:mod:`sim.force_sensing`) in
-  ``policies/pretrained/<preset>/``.
+  exact force fails on the force a dVRK senses (its console's estimate is off by newtons in free space, tens
+  uncalibrated: measured, 0 of 20 Lift episodes with either dVRK preset). The policies trained on the exact
+  force are at the top of ``policies/pretrained/``, the ones trained on a preset's sensed force
+  (:mod:`sim.force_sensing`) in ``policies/pretrained/<preset>/``.
 * **by where the site comes from.** A policy trained on the true site grasps where the site is; one
   trained on the endoscope's estimate of it (``train --perception camera``) learns to grasp where the jaws
   find the flap, a few millimetres from the estimate. With the exact force and the camera's site
