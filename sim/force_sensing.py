@@ -48,6 +48,7 @@ __all__ = [
     "HELD_STILL_ERROR_N",
     "SENSING_NAMES",
     "SENSING_PRESETS",
+    "ColouredNoise",
     "ForceSensor",
     "SensingParams",
     "console_force",
@@ -125,6 +126,34 @@ def console_force(jacobian: np.ndarray, efforts: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.pinv(jacobian.T, rcond=_PINV_RCOND)[:3] @ efforts)
 
 
+class ColouredNoise:
+    """An identified arm's residual efforts (6,): per joint an Ornstein-Uhlenbeck process with the residual's
+    stationary spread ``std`` and correlation time ``time_s`` [s], started from its stationary spread.
+
+    Args:
+        std: Stationary standard deviation per joint (N m, N for the insertion).
+        time_s: Correlation time [s].
+        rng: The generator of the draws.
+    """
+
+    def __init__(self, std: np.ndarray, time_s: float, rng: np.random.Generator) -> None:
+        self.std = np.asarray(std, dtype=float)
+        self.time_s = float(time_s)
+        self.reset(rng)
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """A fresh draw from the stationary spread."""
+        self._rng = rng
+        self.value = self.std * rng.standard_normal(6)
+
+    def advance(self, dt_s: float) -> np.ndarray:
+        """The residual ``dt_s`` [s] later (none, or no spread: as it was)."""
+        if dt_s > 0.0 and np.any(self.std):
+            decay = math.exp(-dt_s / self.time_s)
+            self.value = decay * self.value + self.std * math.sqrt(1.0 - decay * decay) * self._rng.standard_normal(6)
+        return self.value
+
+
 class ForceSensor:
     """The console's force estimate from simulated joint efforts, tick by tick (see the module notes).
 
@@ -137,16 +166,21 @@ class ForceSensor:
         self.params = params
         arm = params.identified_arm
         self._arm = arm
-        self._residual_std = (
-            params.scale * np.asarray(arm.residual) if arm is not None and params.residual else np.zeros(6)
+        rng = rng if rng is not None else np.random.default_rng(0)
+        self.residual = ColouredNoise(  # its first draw is the first episode's
+            params.scale * np.asarray(arm.residual) if arm is not None and params.residual else np.zeros(6),
+            arm.residual_time_s if arm is not None else 1.0,
+            rng,
         )
-        self._residual_time_s = arm.residual_time_s if arm is not None else 1.0
-        self.reset(rng if rng is not None else np.random.default_rng(0))
+        self._at_rest()
 
     def reset(self, rng: np.random.Generator) -> None:
         """A new episode: a fresh residual (drawn from its stationary spread), no earlier velocity."""
-        self._rng = rng
-        self._residual = self._residual_std * rng.standard_normal(6)
+        self.residual.reset(rng)
+        self._at_rest()
+
+    def _at_rest(self) -> None:
+        """No earlier velocity to take an acceleration from."""
         self._last_qd: np.ndarray | None = None
         self._last_commanded_qd: np.ndarray | None = None
         self._qdd, self._commanded_qdd = np.zeros(6), np.zeros(6)
@@ -191,12 +225,7 @@ class ForceSensor:
             self._commanded_qdd += blend * ((commanded - self._last_commanded_qd) / dt_s - self._commanded_qdd)
         self._last_qd, self._last_commanded_qd = qd.copy(), commanded.copy()
         efforts = efforts + self.arm_efforts(configuration.q, qd, self._qdd, self._commanded_qdd)
-        if dt_s > 0.0 and np.any(self._residual_std):
-            decay = math.exp(-dt_s / self._residual_time_s)
-            self._residual = decay * self._residual + self._residual_std * math.sqrt(
-                1.0 - decay * decay
-            ) * self._rng.standard_normal(6)
-        return np.asarray(efforts + self._residual)
+        return np.asarray(efforts + self.residual.advance(dt_s))
 
     def measure(
         self,
@@ -247,7 +276,7 @@ def _bound(
         qd = rng.uniform(-speed, speed)
         # The inertia is linear in the acceleration: its largest lies on a corner of the limits' box.
         qdd = accel * rng.choice([-1.0, 1.0], 6)
-        residual = _RESIDUAL_EDGE * sensor._residual_std * rng.choice([-1.0, 1.0], 6)
+        residual = _RESIDUAL_EDGE * sensor.residual.std * rng.choice([-1.0, 1.0], 6)
         efforts = sensor.arm_efforts(q, qd, qdd, np.zeros(6)) + residual
         worst = max(worst, float(np.linalg.norm(console_force(configuration.base_jacobian(), efforts))))
     return _BOUND_MARGIN * worst

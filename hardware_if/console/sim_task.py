@@ -123,7 +123,6 @@ class TaskArm:
         self.follower = SetpointFollower(physics.control_period_s, np.zeros(6), self.env.config.jaw_open_rad)
         self.env.controller, self.env.controller_name = self.follower, "sim-dvrk set-point follower"
         self._debt_s = 0.0
-        self._qd = np.zeros(6)
         self._velocity = WindowedVelocity()
         self.episode_seed = seed
         self._info: dict[str, Any] = {}
@@ -158,7 +157,7 @@ class TaskArm:
             self.episode_seed = seed
             self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
             self._info = {**self._info, "grasped": False}
-            self._debt_s, self._qd = 0.0, np.zeros(6)
+            self._debt_s = 0.0
             self._velocity.reset(self.env.backend.q)
             self._rest_nodes, self._still_steps, self._asleep = None, 0, False
             self._held = self._sample()
@@ -273,7 +272,6 @@ class TaskArm:
         self.command(q, jaw)
         with self._scene_lock:
             self.env.backend.servo_jp(self.follower.tick(self.env.backend.measure()).command)
-            self._qd = np.zeros(6)
             self._velocity.reset(self.env.backend.q)
             self._held = self._sample()
             return self._held
@@ -298,10 +296,10 @@ class TaskArm:
 
     def _step(self, dt_s: float) -> ArmSample:
         if self._at_rest():  # a still scene is not stepped, but the endoscope keeps filming it
-            self._debt_s, self._qd = 0.0, np.zeros(6)
+            self._debt_s = 0.0
             self._velocity.reset(self.env.backend.q)
             self._offer_frame()
-            return self._held._replace(qd=self._qd.copy(), elapsed_s=0.0)
+            return self._held._replace(qd=self._velocity.qd.copy(), elapsed_s=0.0)
         self._debt_s += max(dt_s, 0.0)
         steps = 0
         while self._debt_s >= self.step_s and steps < self.max_steps_per_call:
@@ -312,8 +310,7 @@ class TaskArm:
         self._still_steps += steps
         if steps == self.max_steps_per_call:
             self._debt_s = min(self._debt_s, self.step_s)  # behind the wall clock: slow down, do not pile up
-        if steps:
-            self._qd = self._velocity.advance(self.env.backend.q, steps * self.step_s)
+        self._velocity.advance(self.env.backend.q, steps * self.step_s)  # no step: the velocity stands
         self._offer_frame()
         return self._sample(steps * self.step_s)
 
@@ -357,7 +354,7 @@ class TaskArm:
             effort = -grasp.pinch_force_n * JAW_LEVER_M if holding else 0.0
         self._jaw = jaw
         q = np.asarray(backend.q, dtype=float).copy()
-        return ArmSample(q, self._qd.copy(), jaw, force, velocity, effort, elapsed_s=dt_s)
+        return ArmSample(q, self._velocity.qd.copy(), jaw, force, velocity, effort, elapsed_s=dt_s)
 
     def close(self) -> None:
         """Release the physics client (after a reset that is running)."""

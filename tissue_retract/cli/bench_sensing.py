@@ -42,7 +42,7 @@ from hardware_if.wrench.fit import (
 from hardware_if.wrench.joint_logs import read_joint_log
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
-from sim.force_sensing import ForceSensor, sensing_params
+from sim.force_sensing import ColouredNoise, ForceSensor, sensing_params
 from sim.identified_arm import ARM_FILES, IdentifiedArm, identified_arm
 from sim.strict_json import write_strict_json
 from tissue_retract.cli._checks import output_file
@@ -122,14 +122,8 @@ def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
 
 def _residual(arm: IdentifiedArm, samples: int, dt_s: float, rng: np.random.Generator) -> np.ndarray:
     """The identified arm's residual efforts along ``samples`` ticks (N, 6), as the sensing model draws it."""
-    std = np.asarray(arm.residual)
-    decay = math.exp(-dt_s / arm.residual_time_s)
-    out = np.zeros((samples, 6))
-    state = std * rng.standard_normal(6)
-    for k in range(samples):
-        state = decay * state + std * math.sqrt(1.0 - decay * decay) * rng.standard_normal(6)
-        out[k] = state
-    return out
+    noise = ColouredNoise(np.asarray(arm.residual), arm.residual_time_s, rng)
+    return np.array([noise.advance(dt_s).copy() for _ in range(samples)])
 
 
 def _norms(log: PreparedLog, efforts: np.ndarray) -> np.ndarray:
