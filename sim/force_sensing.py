@@ -14,8 +14,9 @@ the force part of ``pinv(J^T) tau``, as the console publishes it on ``body``/``s
 (:mod:`sim.identified_arm`: inertia, Coriolis, link and instrument gravity with the counterweight, Coulomb
 and viscous friction, offsets), and ``residual`` what that identification left unexplained on a log it was
 not fitted on, drawn as a coloured noise per joint (an Ornstein-Uhlenbeck process with the residual's
-spread and correlation time). The accelerations come from the joint velocities' change between two
-measurements. On the public logs' fast excitation this reproduces the console's free-space error by
+correlation time, times its spread, which grows as the joint slows through its friction band). The
+accelerations come from the joint velocities' change between two measurements. On the public logs' fast
+excitation this reproduces the console's free-space error, and what a calibration leaves of it, by
 insertion depth and tip speed (``tissue-retract bench sensing``; docs/force-sensing.md).
 
 Presets (:data:`SENSING_PRESETS`):
@@ -48,6 +49,7 @@ __all__ = [
     "HELD_STILL_ERROR_N",
     "SENSING_NAMES",
     "SENSING_PRESETS",
+    "ArmResidual",
     "ColouredNoise",
     "ForceSensor",
     "SensingParams",
@@ -127,31 +129,58 @@ def console_force(jacobian: np.ndarray, efforts: np.ndarray) -> np.ndarray:
 
 
 class ColouredNoise:
-    """An identified arm's residual efforts (6,): per joint an Ornstein-Uhlenbeck process with the residual's
-    stationary spread ``std`` and correlation time ``time_s`` [s], started from its stationary spread.
+    """Six unit Ornstein-Uhlenbeck processes with correlation time ``time_s`` [s], started from their
+    stationary spread (1).
 
     Args:
-        std: Stationary standard deviation per joint (N m, N for the insertion).
         time_s: Correlation time [s].
         rng: The generator of the draws.
     """
 
-    def __init__(self, std: np.ndarray, time_s: float, rng: np.random.Generator) -> None:
-        self.std = np.asarray(std, dtype=float)
+    def __init__(self, time_s: float, rng: np.random.Generator) -> None:
         self.time_s = float(time_s)
         self.reset(rng)
 
     def reset(self, rng: np.random.Generator) -> None:
         """A fresh draw from the stationary spread."""
         self._rng = rng
-        self.value = self.std * rng.standard_normal(6)
+        self.value = rng.standard_normal(6)
 
     def advance(self, dt_s: float) -> np.ndarray:
-        """The residual ``dt_s`` [s] later (none, or no spread: as it was)."""
-        if dt_s > 0.0 and np.any(self.std):
+        """The values ``dt_s`` [s] later (none: as they were)."""
+        if dt_s > 0.0:
             decay = math.exp(-dt_s / self.time_s)
-            self.value = decay * self.value + self.std * math.sqrt(1.0 - decay * decay) * self._rng.standard_normal(6)
+            self.value = decay * self.value + math.sqrt(1.0 - decay * decay) * self._rng.standard_normal(6)
         return self.value
+
+
+class ArmResidual:
+    """What an identified arm's model leaves of its efforts (6,), drawn: per joint a unit coloured noise times
+    the arm's residual spread at the joint's speed (:meth:`~sim.identified_arm.IdentifiedArm.residual_spread`).
+
+    Args:
+        arm: The identified arm; None: no residual.
+        scale: The spread times this.
+        rng: The generator of the draws.
+    """
+
+    def __init__(self, arm: IdentifiedArm | None, scale: float, rng: np.random.Generator) -> None:
+        self._arm, self._scale = arm, float(scale)
+        self._unit = ColouredNoise(arm.residual_time_s if arm is not None else 1.0, rng)
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """A fresh draw from the stationary spread."""
+        self._unit.reset(rng)
+
+    def advance(self, dt_s: float, qd: np.ndarray) -> np.ndarray:
+        """The residual efforts ``dt_s`` [s] later, the joints at velocities ``qd``."""
+        if self._arm is None or self._scale == 0.0:
+            return np.zeros(6)
+        return self._scale * self._arm.residual_spread(qd) * self._unit.advance(dt_s)
+
+    def largest_spread(self) -> np.ndarray:
+        """The residual's standard deviation per joint at its largest, the joints at rest (6,)."""
+        return self._scale * self._arm.largest_residual_spread() if self._arm is not None else np.zeros(6)
 
 
 class ForceSensor:
@@ -167,11 +196,7 @@ class ForceSensor:
         arm = params.identified_arm
         self._arm = arm
         rng = rng if rng is not None else np.random.default_rng(0)
-        self.residual = ColouredNoise(  # its first draw is the first episode's
-            params.scale * np.asarray(arm.residual) if arm is not None and params.residual else np.zeros(6),
-            arm.residual_time_s if arm is not None else 1.0,
-            rng,
-        )
+        self.residual = ArmResidual(arm if params.residual else None, params.scale, rng)  # draws the first episode's
         self._at_rest()
 
     def reset(self, rng: np.random.Generator) -> None:
@@ -225,7 +250,7 @@ class ForceSensor:
             self._commanded_qdd += blend * ((commanded - self._last_commanded_qd) / dt_s - self._commanded_qdd)
         self._last_qd, self._last_commanded_qd = qd.copy(), commanded.copy()
         efforts = efforts + self.arm_efforts(configuration.q, qd, self._qdd, self._commanded_qdd)
-        return np.asarray(efforts + self.residual.advance(dt_s))
+        return np.asarray(efforts + self.residual.advance(dt_s, qd))
 
     def measure(
         self,
@@ -276,7 +301,7 @@ def _bound(
         qd = rng.uniform(-speed, speed)
         # The inertia is linear in the acceleration: its largest lies on a corner of the limits' box.
         qdd = accel * rng.choice([-1.0, 1.0], 6)
-        residual = _RESIDUAL_EDGE * sensor.residual.std * rng.choice([-1.0, 1.0], 6)
+        residual = _RESIDUAL_EDGE * sensor.residual.largest_spread() * rng.choice([-1.0, 1.0], 6)
         efforts = sensor.arm_efforts(q, qd, qdd, np.zeros(6)) + residual
         worst = max(worst, float(np.linalg.norm(console_force(configuration.base_jacobian(), efforts))))
     return _BOUND_MARGIN * worst

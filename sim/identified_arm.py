@@ -5,7 +5,10 @@ the arm's own dynamics: inertia, Coriolis, link and instrument gravity with the 
 offsets. :class:`IdentifiedArm` holds one real arm's, as a parameter vector on the columns of
 :class:`psm_control.effort_model.EffortRegressor` (Pinocchio's joint torque regressor, gravity along three
 axes, friction and offsets per joint), and what the identification left unexplained on a log it was not
-fitted on: a per-joint residual with a correlation time (drawn as a coloured noise).
+fitted on: a per-joint residual with a correlation time (drawn as a coloured noise), whose spread grows as a
+joint slows to a stop. Where a joint's velocity crosses zero its friction is anywhere in its band (stiction,
+the Stribeck dip), which a fit of ``sign(qd)`` friction cannot follow: on the WPI PSM's held-out log the
+residual of its first two joints doubles below 0.08 rad/s, of its insertion below 5 mm/s.
 
 ``tissue-retract bench sensing`` sets it beside the sensing presets of :mod:`sim.force_sensing` on real
 logs: on the WPI PSM's held-out log it reproduces the console's free-space error by insertion depth and
@@ -45,10 +48,13 @@ class IdentifiedArm:
         name: Its name (a key of :data:`ARM_FILES`, or a file's stem).
         columns: The regressor's identified columns.
         parameters: Their values.
-        residual: Standard deviation of what the identification left per joint on a held-out log
-            (6,) [N m, N for the insertion].
-        residual_time_s: The residual's correlation time (its autocorrelation's 1/e lag, the median over
-            the joints) [s].
+        residual: Standard deviation of what the identification left per joint on a held-out log, the
+            joint moving (6,) [N m, N for the insertion].
+        residual_band: What the friction band adds to it with the joint at rest (6,), as a standard deviation
+            added in quadrature (see :meth:`residual_spread`).
+        residual_band_speed: The joint speed at which the band's variance falls to 1/e (6,) [rad/s, m/s].
+        residual_time_s: The residual's correlation time (the 1/e lag of its autocorrelation, divided by its
+            spread, the median over the joints) [s].
         residual_bound_n: 1.25 x the largest force error the identification left on the held-out log at
             retraction speeds (tool tip at most 0.1 m/s) [N]: what a calibration of this arm is trusted to.
         provenance: Where the numbers come from: the command, the logs fitted and held out, the figures.
@@ -58,6 +64,8 @@ class IdentifiedArm:
     columns: tuple[int, ...]
     parameters: tuple[float, ...]
     residual: tuple[float, ...]
+    residual_band: tuple[float, ...]
+    residual_band_speed: tuple[float, ...]
     residual_time_s: float
     residual_bound_n: float
     provenance: str
@@ -83,6 +91,16 @@ class IdentifiedArm:
         rows = shared_regressor().rows
         return np.asarray((rows(q, zero, qdd) - rows(q, zero, zero)) @ self._vector)
 
+    def residual_spread(self, qd: np.ndarray) -> np.ndarray:
+        """The residual's standard deviation per joint at the joint velocities ``qd`` (6,):
+        ``sqrt(residual**2 + residual_band**2 * exp(-|qd| / residual_band_speed))``."""
+        band = np.square(self.residual_band) * np.exp(-np.abs(qd) / np.asarray(self.residual_band_speed))
+        return np.sqrt(np.square(self.residual) + band)
+
+    def largest_residual_spread(self) -> np.ndarray:
+        """The residual's standard deviation per joint at rest, its largest (6,)."""
+        return self.residual_spread(np.zeros(6))
+
     def to_json(self) -> dict[str, Any]:
         """The file's content."""
         return {
@@ -91,6 +109,8 @@ class IdentifiedArm:
             "columns": list(self.columns),
             "parameters": list(self.parameters),
             "residual": list(self.residual),
+            "residual_band": list(self.residual_band),
+            "residual_band_speed": list(self.residual_band_speed),
             "residual_time_s": self.residual_time_s,
             "residual_bound_n": self.residual_bound_n,
             "provenance": self.provenance,
@@ -104,6 +124,8 @@ class IdentifiedArm:
             columns=tuple(int(c) for c in data["columns"]),
             parameters=tuple(float(v) for v in data["parameters"]),
             residual=tuple(float(v) for v in data["residual"]),
+            residual_band=tuple(float(v) for v in data["residual_band"]),
+            residual_band_speed=tuple(float(v) for v in data["residual_band_speed"]),
             residual_time_s=float(data["residual_time_s"]),
             residual_bound_n=float(data["residual_bound_n"]),
             provenance=str(data["provenance"]),

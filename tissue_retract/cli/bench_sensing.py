@@ -23,8 +23,11 @@ written as :mod:`sim.identified_arm` reads it; then it compares on the held-out 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import functools
 import itertools
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -42,10 +45,10 @@ from hardware_if.wrench.fit import (
 from hardware_if.wrench.joint_logs import read_joint_log
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
-from sim.force_sensing import ColouredNoise, ForceSensor, sensing_params
+from sim.force_sensing import ArmResidual, ForceSensor, sensing_params
 from sim.identified_arm import ARM_FILES, IdentifiedArm, identified_arm
 from sim.strict_json import write_strict_json
-from tissue_retract.cli._checks import output_file
+from tissue_retract.cli._checks import int_in, output_file
 
 __all__ = ["add_arguments", "run"]
 
@@ -75,6 +78,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="also compare what a deploy calibrated by this file reads (fit it on another log)",
     )
     parser.add_argument(
+        "--draws",
+        type=int_in(1, 1000),
+        default=16,
+        help="the models' residual drawn this many times, their RMS over all draws (default: 16)",
+    )
+    parser.add_argument(
         "--write-arm",
         metavar="OUT.json",
         type=output_file("--write-arm"),
@@ -86,6 +95,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+#: Where the friction band's speed is looked for: these quantiles of a joint's speeds on the held-out log.
+_BAND_SPEED_QUANTILES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5)
+
+
+def _spread_with_speed(residual: np.ndarray, speed: np.ndarray) -> tuple[float, float, float]:
+    """One joint's residual spread as :meth:`IdentifiedArm.residual_spread` models it: the moving spread, the
+    band's and its speed, ``variance = moving**2 + band**2 exp(-speed / band_speed)``.
+
+    For each band speed tried, the two variances are the least-squares fit of the squared residual (none
+    negative); the speed kept is the one of largest Gaussian likelihood, no band when none is likelier.
+    Written here: it is a two-parameter moment fit with a one-dimensional search.
+    """
+    squared = np.square(residual)
+    best = (float(np.sqrt(squared.mean())), 0.0, 1.0)
+    best_likelihood = -0.5 * float(np.sum(np.log(squared.mean()) + 1.0))
+    for band_speed in np.quantile(speed, _BAND_SPEED_QUANTILES):
+        if band_speed <= 0.0:
+            continue
+        decay = np.exp(-speed / band_speed)
+        design = np.column_stack([np.ones_like(decay), decay])
+        moving, band = np.linalg.lstsq(design, squared, rcond=None)[0]
+        if band <= 0.0 or moving <= 0.0:
+            continue
+        variance = moving + band * decay
+        likelihood = -0.5 * float(np.sum(np.log(variance) + squared / variance))
+        if likelihood > best_likelihood:
+            best, best_likelihood = (float(np.sqrt(moving)), float(np.sqrt(band)), float(band_speed)), likelihood
+    return best
+
+
 def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
     """Identify an arm on the ``--from`` logs, measure its residual on ``--held-out``, write it."""
     if not args.held_out:
@@ -93,20 +132,19 @@ def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
     fit = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.logs]
     held_out = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.held_out]
     calibration, _ = fit_calibration(args.arm, fit, held_out)
-    vector = calibration.parameter_vector()
-    residual = np.concatenate([p.log.effort - p.rows @ vector for p in held_out])
-    lags = []
-    for joint in range(6):  # the 1/e lag of each joint's residual autocorrelation
-        x = residual[:, joint] - residual[:, joint].mean()
-        correlation = np.correlate(x, x, "full")[len(x) - 1 :] / max(float(x @ x), 1e-30)
-        lags.append(int(np.argmax(correlation < math.exp(-1.0))) / held_out[0].log.rate_hz)
+    residual = np.concatenate([p.log.effort - p.rows @ calibration.parameter_vector() for p in held_out])
+    speed = np.abs(np.concatenate([p.qd for p in held_out]))
+    spreads = [_spread_with_speed(residual[:, joint], speed[:, joint]) for joint in range(6)]
+    moving, band, band_speed = (tuple(float(s[i]) for s in spreads) for i in range(3))
     name = Path(args.write_arm).stem.removeprefix("identified_arm_").replace("_", "-")
     arm = IdentifiedArm(
         name=name,
         columns=calibration.columns,
         parameters=calibration.parameters,
-        residual=tuple(float(v) for v in residual.std(axis=0)),
-        residual_time_s=float(np.median(lags)),
+        residual=moving,
+        residual_band=band,
+        residual_band_speed=band_speed,
+        residual_time_s=0.0,
         residual_bound_n=calibration.error_bound_with_acceleration_n,
         provenance=(
             f"tissue-retract bench sensing --from {' '.join(Path(p).name for p in args.logs)} --held-out "
@@ -115,15 +153,25 @@ def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
             f"free-space error {calibration.rms_before_n:.2f} N RMS, the arm's residual {calibration.rms_after_n:.2f} N"
         ),
     )
+    normalised = residual / arm.residual_spread(speed)
+    lags = []
+    for joint in range(6):  # the 1/e lag of each joint's residual over its spread, by autocorrelation
+        x = normalised[:, joint] - normalised[:, joint].mean()
+        correlation = np.correlate(x, x, "full")[len(x) - 1 :] / max(float(x @ x), 1e-30)
+        lags.append(int(np.argmax(correlation < math.exp(-1.0))) / held_out[0].log.rate_hz)
+    arm = dataclasses.replace(arm, residual_time_s=float(np.median(lags)))
     arm.write(Path(args.write_arm))
     print(f"identified arm written to {args.write_arm}: {arm.provenance}")
     return arm, list(args.held_out)
 
 
-def _residual(arm: IdentifiedArm, samples: int, dt_s: float, rng: np.random.Generator) -> np.ndarray:
-    """The identified arm's residual efforts along ``samples`` ticks (N, 6), as the sensing model draws it."""
-    noise = ColouredNoise(np.asarray(arm.residual), arm.residual_time_s, rng)
-    return np.array([noise.advance(dt_s).copy() for _ in range(samples)])
+def _arm_errors(log: PreparedLog, arm: IdentifiedArm, rng: np.random.Generator) -> np.ndarray:
+    """The identified arm's free-space error along the log's motion (N,) [N]: its efforts and its residual, drawn
+    as the sensing model draws it."""
+    residual = ArmResidual(arm, 1.0, rng)
+    dt_s = 1.0 / log.log.rate_hz
+    drawn = np.array([residual.advance(dt_s, qd) for qd in log.qd])
+    return _norms(log, log.rows @ arm.parameter_vector() + drawn)
 
 
 def _norms(log: PreparedLog, efforts: np.ndarray) -> np.ndarray:
@@ -131,9 +179,15 @@ def _norms(log: PreparedLog, efforts: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.einsum("kij,kj->ki", log.projector, efforts * log.joint_mask), axis=1)
 
 
-def _preset_errors(log: PreparedLog, preset: str) -> np.ndarray:
+def _over_draws(draws: int, error: Callable[[np.random.Generator], np.ndarray]) -> np.ndarray:
+    """A model's error per sample (N,) [N], root mean square over ``draws`` draws of its residual (seeds 0, 1, ...):
+    the RMS of any bin of it is the model's expected RMS there, not one draw's."""
+    return np.sqrt(np.mean([np.square(error(np.random.default_rng(seed))) for seed in range(draws)], axis=0))
+
+
+def _preset_errors(log: PreparedLog, preset: str, rng: np.random.Generator) -> np.ndarray:
     """A sensing preset's free-space error along the log's motion (N,) [N]."""
-    sensor = ForceSensor(sensing_params(preset), np.random.default_rng(0))
+    sensor = ForceSensor(sensing_params(preset), rng)
     configuration = PsmModel().configuration()
     dt_s = 1.0 / log.log.rate_hz
     efforts = np.zeros((len(log.log.q), 6))
@@ -200,17 +254,13 @@ def run(args: argparse.Namespace) -> int:
     results: dict[str, Any] = {"identified_arm": arm.name, "logs": {}}
     for path in paths:
         log = prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate))
-        dt_s = 1.0 / log.log.rate_hz
-        residual = _residual(arm, len(log.log.q), dt_s, np.random.default_rng(0))
-        vector = arm.parameter_vector()
-        full = log.rows @ vector
         entry = {
             "console": _compare(
                 log,
                 {
                     "real console": _norms(log, log.log.effort),
-                    "dvrk preset": _preset_errors(log, "dvrk"),
-                    f"{arm.name}": _norms(log, full + residual),
+                    "dvrk preset": _over_draws(args.draws, functools.partial(_preset_errors, log, "dvrk")),
+                    f"{arm.name}": _over_draws(args.draws, functools.partial(_arm_errors, log, arm)),
                 },
             )
         }
@@ -221,7 +271,9 @@ def run(args: argparse.Namespace) -> int:
                 log,
                 {
                     "real, calibrated": error.after_n,
-                    "dvrk-calibrated": _preset_errors(log, "dvrk-calibrated"),
+                    "dvrk-calibrated": _over_draws(
+                        args.draws, functools.partial(_preset_errors, log, "dvrk-calibrated")
+                    ),
                     "no acceleration": error.after_live_n,
                 },
             )
