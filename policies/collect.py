@@ -42,9 +42,10 @@ class _WorkerTask(gym.Wrapper[Any, Any, Any, Any]):
         super().__init__(env)
         self.task_id = task_id
 
-    def demonstrations(self, count: int, seed: int) -> list[Episode]:
-        """``count`` successful expert episodes seeded from ``seed`` (:func:`policies.demos.collect_demos`)."""
-        return collect_demos(self.env, expert_for(self.task_id), count, seed)
+    def demonstrations(self, count: int, seed: int, lag_blind: bool = False) -> list[Episode]:
+        """``count`` successful expert episodes seeded from ``seed`` (:func:`policies.demos.collect_demos`;
+        ``lag_blind``: :func:`policies.demos.expert_for`'s)."""
+        return collect_demos(self.env, expert_for(self.task_id, lag_blind=lag_blind), count, seed)
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         observation, _ = self.env.reset(**kwargs)
@@ -193,9 +194,10 @@ class OverlappedCollector(Collector):
         batch, _, terminated, truncated, _ = self._envs.step_wait()
         return _first(batch), bool(terminated[0]), bool(truncated[0])
 
-    def start_demonstrations(self, count: int, seed: int) -> None:
-        """Start collecting ``count`` expert demonstrations in the worker, seeded from ``seed``."""
-        self._envs.call_async("demonstrations", count, seed)
+    def start_demonstrations(self, count: int, seed: int, lag_blind: bool = False) -> None:
+        """Start collecting ``count`` expert demonstrations in the worker, seeded from ``seed`` (``lag_blind``:
+        from the lag-blind expert)."""
+        self._envs.call_async("demonstrations", count, seed, lag_blind)
 
     def finish_demonstrations(self) -> list[Episode]:
         """The demonstrations :meth:`start_demonstrations` asked for, once the worker has them.

@@ -91,8 +91,9 @@ def rollout(
     return episode, success
 
 
-def expert_for(task_id: str) -> ExpertFactory:
-    """The scripted expert of a task, as a factory of controllers.
+def expert_for(task_id: str, *, lag_blind: bool = False) -> ExpertFactory:
+    """The scripted expert of a task, as a factory of controllers (``lag_blind``: the simulation's expert
+    moving without knowing the actions still in flight, :class:`sim.expert.ScriptedExpert`).
 
     Raises:
         DemonstrationError: No expert is known for the task.
@@ -100,7 +101,7 @@ def expert_for(task_id: str) -> ExpertFactory:
     if task_id == TOY_TASK_ID:
         return lambda env: _FunctionController(env, toy_expert)
     if task_id.startswith("TissueRetract-"):
-        return functools.partial(ScriptedExpert, observed=True)
+        return functools.partial(ScriptedExpert, observed=True, lag_blind=lag_blind)
     raise DemonstrationError(
         f"no scripted expert is known for {task_id!r}: write demonstrations to a file "
         "(tissue-retract demo --task ID --episodes N --out demos.npz) and pass --demos-file demos.npz"

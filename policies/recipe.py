@@ -62,6 +62,8 @@ class Recipe:
             episode, demonstration and evaluation draws its conditions from them. None: the nominal task.
         budget_s: The whole command's wall-clock budget [s] unless ``--budget-s`` says otherwise; None: none.
         preparation_share: Under a budget, the share of it demonstrations and pretraining may take.
+        lag_blind_demos: Demonstrations from the expert moving without knowing the actions still in flight
+            (:class:`sim.expert.ScriptedExpert`'s ``lag_blind``).
     """
 
     name: str
@@ -75,6 +77,7 @@ class Recipe:
     vary: str | None = None
     budget_s: float | None = None
     preparation_share: float = PREPARATION_SHARE
+    lag_blind_demos: bool = False
 
 
 #: ``tissue-retract train`` without ``--algo``.
@@ -101,4 +104,5 @@ ROBUST_RECIPE = Recipe(
     vary=SWEEP_VARY,
     budget_s=570.0,
     preparation_share=0.8,
+    lag_blind_demos=True,
 )

@@ -88,6 +88,8 @@ class RunSpec:
         stop_at_success: End the run at the first evaluation with at least this success rate; its
             policy is ``policy.safetensors``. None: train all ``episodes``.
         preparation_share: Under a budget, the share of it that demonstrations and pretraining may take.
+        lag_blind_demos: Demonstrations from the expert moving without knowing the actions still in flight
+            (:class:`sim.expert.ScriptedExpert`'s ``lag_blind``).
     """
 
     task_id: str
@@ -109,6 +111,7 @@ class RunSpec:
     overlap: bool = False
     stop_at_success: float | None = None
     preparation_share: float = PREPARATION_SHARE
+    lag_blind_demos: bool = False
 
     def __post_init__(self) -> None:
         for name, low in (("seed", 0), ("episodes", 0), ("demos", 0), ("eval_every", 1), ("eval_episodes", 1)):
@@ -228,11 +231,12 @@ def _demonstrations(
     worker = collector if isinstance(collector, OverlappedCollector) else None
     if budget is not None and budget.budget_s is not None:
         return _budgeted_demonstrations(spec, env, worker, budget, seed, on_success)
+    expert = expert_for(spec.task_id, lag_blind=spec.lag_blind_demos)
     if worker is None or spec.demos < 2:
-        return collect_demos(env, expert_for(spec.task_id), spec.demos, seed=seed, on_success=tick)
+        return collect_demos(env, expert, spec.demos, seed=seed, on_success=tick)
     here = spec.demos // 2
-    worker.start_demonstrations(spec.demos - here, seed + default_attempts(here))
-    episodes = collect_demos(env, expert_for(spec.task_id), here, seed=seed, on_success=tick)
+    worker.start_demonstrations(spec.demos - here, seed + default_attempts(here), spec.lag_blind_demos)
+    episodes = collect_demos(env, expert, here, seed=seed, on_success=tick)
     there = worker.finish_demonstrations()
     if on_success is not None:
         on_success(len(there))
@@ -252,14 +256,15 @@ def _budgeted_demonstrations(
     seeds = [seed + k * default_attempts(DEMO_CHUNK) for k in range(len(sizes))]
     tick = (lambda: on_success(1)) if on_success is not None else None
     horizon = int(env.spec.max_episode_steps or 50) if env.spec is not None else 50
+    expert = expert_for(spec.task_id, lag_blind=spec.lag_blind_demos)
     episodes: list[Episode] = []
     k = 0
     while k < len(sizes) and budget.preparing_fits():
         started = time.monotonic()
         shared = worker is not None and k + 1 < len(sizes)
         if shared and worker is not None:
-            worker.start_demonstrations(sizes[k + 1], seeds[k + 1])
-        episodes += collect_demos(env, expert_for(spec.task_id), sizes[k], seed=seeds[k], on_success=tick)
+            worker.start_demonstrations(sizes[k + 1], seeds[k + 1], spec.lag_blind_demos)
+        episodes += collect_demos(env, expert, sizes[k], seed=seeds[k], on_success=tick)
         if shared and worker is not None:
             there = worker.finish_demonstrations()
             episodes += there

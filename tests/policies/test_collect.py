@@ -128,3 +128,21 @@ def test_a_killed_parent_leaves_its_worker_to_end_without_a_traceback() -> None:
     finally:
         child.kill()
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
+
+
+def test_the_worker_collects_lag_blind_demonstrations_when_asked() -> None:
+    """Asked for lag-blind demonstrations, the worker runs the lag-blind expert: its episodes are this
+    process's lag-blind ones, and not the lag-aware expert's (Task III at its nominal 0-1 steps of latency)."""
+    task = ensure_registered("multisite")
+    env = gym.make(task)
+    overlapped = OverlappedCollector(task)
+    try:
+        overlapped.start_demonstrations(1, seed=21, lag_blind=True)
+        (there,) = overlapped.finish_demonstrations()
+        (here,) = collect_demos(env, expert_for(task, lag_blind=True), 1, seed=21)
+        (aware,) = collect_demos(env, expert_for(task), 1, seed=21)
+    finally:
+        overlapped.close()
+        env.close()
+    np.testing.assert_array_equal(here.action, there.action)
+    assert not np.array_equal(here.action[: len(aware.action)], aware.action[: len(here.action)])

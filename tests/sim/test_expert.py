@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from policies.resolve import resolve_policy
 from sim.evaluation import FAILURE_CLASSES, run_episode, summarize
+from sim.expert import ScriptedExpert
 from tests.sim.conftest import make_env
 
 
@@ -33,3 +36,34 @@ def test_random_policy_failures_are_classified() -> None:
     assert sum(summary["failure_classes"].values()) == 3
     for key in ("success_rate", "ci95", "episodes", "peak_force_n", "grip_losses", "tissue_damage", "sim_unstable"):
         assert key in summary
+
+
+def test_the_lag_blind_expert_succeeds_at_three_steps_of_latency_without_reading_them() -> None:
+    """With three actions in flight the lag-blind expert's actions do not depend on them, and it still grasps
+    and carries the flap to the goal (its demonstrations are what a learner that cannot see the lag can
+    imitate)."""
+    env = make_env("multisite")
+    try:
+        expert = ScriptedExpert(env, lag_blind=True)
+        results = []
+        for seed in (910, 911):
+            obs, _ = env.reset(seed=seed, options={"action_latency_steps": 3})
+            assert len(env.unwrapped._pending) == 3
+            expert.reset()
+            success = False
+            while True:
+                action = expert(obs)
+                if expert.phase in ("approach", "retract"):
+                    pending = list(env.unwrapped._pending)
+                    env.unwrapped._pending.clear()  # what it would do were nothing in flight
+                    unaware = expert(obs)
+                    env.unwrapped._pending.extend(pending)
+                    assert np.array_equal(action, unaware)
+                obs, _, terminated, truncated, info = env.step(action)
+                if terminated or truncated:
+                    success = bool(info["is_success"])
+                    break
+            results.append(success)
+    finally:
+        env.close()
+    assert all(results)

@@ -207,6 +207,7 @@ def run(args: argparse.Namespace) -> int:
         overlap=recipe is not None and recipe.overlap,
         stop_at_success=None if recipe is None else recipe.stop_at_success,
         preparation_share=recipe.preparation_share if recipe is not None else PREPARATION_SHARE,
+        lag_blind_demos=recipe is not None and recipe.lag_blind_demos,
     )
     if recipe is not None:
         print(

@@ -80,7 +80,8 @@ def test_write_arm_recovers_a_friction_band_in_the_residual(tmp_path: Path) -> N
     )
     fit, held_out = _bag(tmp_path / "fit", truth, 0.0), _bag(tmp_path / "held", truth, 1.0, residual=True)
     out = tmp_path / "identified_arm_band.json"
-    args = ["bench", "sensing", "--from", str(fit), "--held-out", str(held_out), "--write-arm", str(out), "--draws", "1"]
+    args = ["bench", "sensing", "--from", str(fit), "--held-out", str(held_out), "--write-arm", str(out)]
+    args += ["--draws", "1"]
     assert main(args) == 0
     arm = IdentifiedArm.from_json(json.loads(out.read_text()))
     for speed in (np.zeros(6), np.array([0.2, 0.2, 0.02, 0.2, 0.2, 0.2])):
