@@ -260,7 +260,16 @@ FAULTS: tuple[Fault, ...] = (
             4,
             f"invalid data: {topic}",
             action=f"nan:{topic}",
-            also=(f"another source: /PSM1/{topic} ", *(("another console: /PSM1",) if topic == "measured_js" else ())),
+            # The injector is a second publisher of the topic: on measured_js the deadman's publisher count,
+            # or the console check, may see it before the NaN arrives; each is a right hold.
+            also=(
+                f"another source: /PSM1/{topic} ",
+                *(
+                    ("another console: /PSM1", "publisher conflict: 2 publishers of measured_js")
+                    if topic == "measured_js"
+                    else ()
+                ),
+            ),
         )
         for topic in (
             "measured_js",
@@ -608,16 +617,17 @@ def run_fault(
     """Run one fault in ``workdir`` on ROS domain ``domain_id``; return what happened.
 
     ``guard_s`` only bounds a run that went wrong; a correct one ends as soon as its deploy does. When
-    another machine user's arm shares the domain (the deploy holds on ``another console``), the fault
-    runs again on ``retry_domains`` in turn (default: two others, 37 and 74 ids on). A caller that shares
-    the machine's domains with other runs of its own (test workers) names domains only it uses.
+    another machine user's arm shares the domain (the deploy holds on ``another console`` or a ``publisher
+    conflict`` the fault does not explain), the fault runs again on ``retry_domains`` in turn (default: two
+    others, 37 and 74 ids on). A caller that shares the machine's domains with other runs of its own (test
+    workers) names domains only it uses.
     """
     if retry_domains is None:
         retry_domains = [1 + (domain_id - 1 + 37 * attempt) % 100 for attempt in (1, 2)]
     for domain in (domain_id, *retry_domains):
         result = _run_fault(fault, workdir, domain, guard_s)
         shared = any(text in result.hold for text in ("publisher conflict", "another console"))
-        if not shared or "another console" in fault.reason:
+        if not shared or fault.explains(result.hold):
             break
     return result
 
