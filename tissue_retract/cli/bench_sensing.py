@@ -109,7 +109,7 @@ def _spread_with_speed(residual: np.ndarray, speed: np.ndarray) -> tuple[float, 
     """
     squared = np.square(residual)
     best = (float(np.sqrt(squared.mean())), 0.0, 1.0)
-    best_likelihood = -0.5 * float(np.sum(np.log(squared.mean()) + 1.0))
+    best_likelihood = -0.5 * squared.size * (float(np.log(squared.mean())) + 1.0)
     for band_speed in np.quantile(speed, _BAND_SPEED_QUANTILES):
         if band_speed <= 0.0:
             continue
