@@ -11,12 +11,12 @@ are several, else the last third of the one); the second prints the free-space f
 estimate and of the calibrated one on the logs, overall and by insertion depth and tool-tip speed.
 
 Live, with no tissue in the jaws, the arm is driven through two short excitation trajectories (Lissajous
-motions of the tool tip with a yaw swing, about where it starts, through the whole control chain: IK,
-safety filter, Ruckig, verifier). The first is fitted (:mod:`hardware_if.wrench.calibration`), the second
-held out: the command prints the free-space force error of the console's estimate and of the calibrated
-one on it (RMS and largest, N), and writes the calibration to ``--out`` for
-``deploy --target dvrk --wrench-calibration F.json``. The arm must be ENABLED and homed (``deploy`` or the
-dVRK's own client does that); nothing may touch the instrument meanwhile.
+motions of the tool tip with a yaw swing about the start, the tool 12 cm in and the jaws open, through the
+whole control chain: IK, safety filter, Ruckig, verifier). The first is fitted
+(:mod:`hardware_if.wrench.calibration`), the second held out: the command prints the free-space force error
+of the console's estimate and of the calibrated one on it (RMS and largest, N), and writes the calibration
+to ``--out`` for ``deploy --target dvrk --wrench-calibration F.json``. The arm must be ENABLED and homed
+(``deploy`` or the dVRK's own client does that); nothing may touch the instrument meanwhile.
 """
 
 from __future__ import annotations
@@ -39,6 +39,8 @@ from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
+from sim.envs.base import EnvConfig
+from sim.force_sensing import error_bound_n, sensing_params
 from sim.sweep.stopping import handling
 from tissue_retract.cli._checks import float_in, output_file
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
@@ -47,9 +49,13 @@ __all__ = ["add_arguments", "run"]
 
 #: Each trajectory's tip frequencies along x, y, z and its yaw frequency [Hz]: the fitted and the held-out
 #: ones differ, so the check is on motions the fit did not see.
-_FREQUENCIES_HZ = ((0.31, 0.47, 0.23, 0.19), (0.41, 0.29, 0.37, 0.27))
-_AMPLITUDE_M = np.array([0.02, 0.02, 0.015])
-_YAW_AMPLITUDE_RAD = 0.4
+#: Tip speeds up to about 0.3 m/s, as the public real PSMs' identification runs (0.25-0.42 m/s), and 5 cm
+#: about the start, within the workspace box: slower or smaller swings excite the gravity and inertia terms
+#: too little for the fit to tell them from the arm's friction residual (on sim-dvrk: 1.1-1.3 x lower RMS
+#: held out at half these amplitudes and speeds, 2-3 x at these).
+_FREQUENCIES_HZ = ((0.62, 0.94, 0.46, 0.38), (0.82, 0.58, 0.74, 0.54))
+_AMPLITUDE_M = np.array([0.05, 0.05, 0.03])
+_YAW_AMPLITUDE_RAD = 0.8
 #: The deadman of the excitation [s]: in free space, with no tissue held, a late measurement costs a sample,
 #: not safety; a loaded machine's console is late by more than the deploy's 50 ms now and then.
 _DEADMAN_S = 0.25
@@ -57,6 +63,8 @@ _DEADMAN_S = 0.25
 _MAX_HOLDS = 20
 #: A new target for the chain every this many ticks (the policies' 10 Hz at the dVRK's 100 Hz).
 _TICKS_PER_TARGET = 10
+#: The jaws during the excitation: open, as at an episode's start.
+EXCITATION_JAW_RAD = EnvConfig().jaw_open_rad
 #: Log layouts (:mod:`hardware_if.wrench.joint_logs`) recorded on real PSMs: the public WPI and radiang logs.
 _REAL_PSM_LAYOUTS = {"wpi", "radiang"}
 
@@ -122,7 +130,7 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
             # An arm that fell behind (a slow console) is led back to the wave, within what the chain accepts.
             reach = 0.5 * chain.config.max_translation_m
             step *= min(1.0, reach / max(float(np.linalg.norm(step)), 1e-12))
-            chain.set_target(CartesianDelta(step, yaw, 0.0, "local"), measured)
+            chain.set_target(CartesianDelta(step, yaw, EXCITATION_JAW_RAD, "local"), measured)
         output = chain.tick(measured)
         if output.safety_stop:
             raise RuntimeError(f"the control chain stopped the excitation: {output.reason}")
@@ -152,13 +160,15 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
 
 
 def _to_start(client: Any, wait_s: float) -> None:
-    """Move to the excitation's start (the tool 12 cm in, the wrist straight) with the console's move_jp.
+    """Move to the excitation's start (the tool 12 cm in, the wrist straight, the jaws open) with the
+    console's move_jp.
 
     A homed PSM rests with the tool at the RCM, where the chain refuses to work (the dVRK's 45 mm minimum).
+    Open jaws hold nothing, so the chain's tissue-force limit stays out of the excitation (see :func:`run`).
     """
     from hardware_if.client.arm_pose import return_to_start
 
-    reason = return_to_start(client, PsmModel().home(), wait_s)
+    reason = return_to_start(client, PsmModel().home(), wait_s, start_jaw=EXCITATION_JAW_RAD)
     if reason:
         raise RuntimeError(f"the arm did not reach the excitation's start: {reason}")
 
@@ -283,7 +293,16 @@ def run(args: argparse.Namespace) -> int:
     from hardware_if.wrench.calibration import EXACT_SENSING
     from hardware_if.wrench.fit import fit_calibration, prepare_log, unimproved
 
-    config = dataclasses.replace(SafetyConfig(), control_rate_hz=100.0, deadman_timeout_s=_DEADMAN_S)
+    # The console's force estimate is what is being calibrated: in free space all of it is error (10 N and more
+    # on a real arm). The chain is told so, as deploy tells it for an uncalibrated dVRK: taken for a tissue
+    # force, it made the retraction-force limit back the tool off along it and steered the excitation up to
+    # the workspace box's top (measured: the limit intervened in 3491 of 3553 ticks).
+    config = dataclasses.replace(
+        SafetyConfig(),
+        control_rate_hz=100.0,
+        deadman_timeout_s=_DEADMAN_S,
+        force_sensing_error_n=error_bound_n(sensing_params("dvrk")),
+    )
     chain = ControlChain(config)
     node = f"{args.arm.lower()}_calibrate_wrench"
     stage = "waiting for the arm"
@@ -316,6 +335,7 @@ def run(args: argparse.Namespace) -> int:
                     fit = _trajectory(client, chain, _FREQUENCIES_HZ[0], args.duration, args.wait)
                     stage = "excitation 2 of 2"
                     print(f"{args.arm}: {stage}, held out ({args.duration:g} s)", flush=True)
+                    _to_start(client, args.wait)  # about the same start: the box has room for one swing
                     held_out = _trajectory(client, chain, _FREQUENCIES_HZ[1], args.duration, args.wait)
                     consoles = served_by(client, args.arm)  # by now discovery has brought the console's name
                 except (DvrkError, RuntimeError) as e:
