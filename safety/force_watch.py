@@ -5,7 +5,10 @@ and a limit below what holding the tissue costs cannot be met at all. Neither ma
 
 - A :class:`ForceLimitWatch` takes the measured force of every control tick and reports each excursion
   above the limit (:class:`ForceExcursion`: when it began, how long it lasted, its peak) so that evaluate,
-  deploy, sweeps and recordings count it as a ``force_limit_exceeded`` event.
+  deploy, sweeps and recordings count it as a ``force_limit_exceeded`` event. Given the force sensing's
+  error bound (a dVRK's ``measured_cf`` is off by newtons in free space), it reports only what the
+  measurement can tell: a measured force more than the bound above the limit, where the true force was
+  above it too. The simulation watches the true force (bound 0).
 - A :class:`ForceLimitStallWatch` tells when the limit, not the policy, stops the retraction: for a
   second with tissue in the jaws the filter cut the policy's motion for the force on nearly every tick
   and the grasp point crawled (below :data:`STALL_SPEED_M_S`). The bound is then kept by not lifting and
@@ -49,6 +52,7 @@ class ForceExcursion:
         peak_n: Largest force magnitude during it [N].
         limit_n: The force limit in force [N].
         open: Still going on at the last tick seen.
+        error_n: The force sensing's error bound [N]: the true force reached at least ``peak_n - error_n``.
     """
 
     start_s: float
@@ -56,16 +60,17 @@ class ForceExcursion:
     peak_n: float
     limit_n: float
     open: bool = False
+    error_n: float = 0.0
 
     @property
     def excess_n(self) -> float:
-        """How far the peak went past the limit [N]."""
-        return self.peak_n - self.limit_n
+        """How far the true force went past the limit at least [N]."""
+        return self.peak_n - self.error_n - self.limit_n
 
     @property
     def ratio(self) -> float:
-        """Peak over limit."""
-        return self.peak_n / self.limit_n
+        """The true force's peak over the limit, at least."""
+        return (self.peak_n - self.error_n) / self.limit_n
 
     def to_event(self) -> dict[str, Any]:
         """The ``force_limit_exceeded`` event, JSON-ready."""
@@ -78,11 +83,15 @@ class ForceLimitWatch:
     Args:
         limit_n: The force limit [N] (positive).
         period_s: The control period [s]: the time each tick above the limit counts for.
+        error_n: How far the measured force may be from the true one [N] (0: exact): a tick counts when the
+            measured force is above ``limit_n + error_n``.
     """
 
-    def __init__(self, limit_n: float, period_s: float) -> None:
+    def __init__(self, limit_n: float, period_s: float, error_n: float = 0.0) -> None:
         self.limit_n = float(limit_n)
         self.period_s = float(period_s)
+        self.error_n = float(error_n)
+        self._threshold = self.limit_n + self.error_n
         self.excursions: list[ForceExcursion] = []
         self._start = 0.0
         self._ticks = 0
@@ -106,7 +115,7 @@ class ForceLimitWatch:
         """
         vector = np.asarray(force_n, dtype=float).reshape(-1)
         magnitude = float(math.sqrt(float(vector @ vector))) if vector.size > 1 else abs(float(vector[0]))
-        if magnitude <= self.limit_n:  # NaN fails this comparison
+        if magnitude <= self._threshold:  # NaN fails this comparison
             return self.finish()
         if self._ticks == 0:
             self._start, self._peak = float(stamp_s), 0.0
@@ -128,7 +137,7 @@ class ForceLimitWatch:
         return self.excursions + ([self._current(open_=True)] if self._ticks else [])
 
     def _current(self, *, open_: bool) -> ForceExcursion:
-        return ForceExcursion(self._start, self._ticks * self.period_s, self._peak, self.limit_n, open_)
+        return ForceExcursion(self._start, self._ticks * self.period_s, self._peak, self.limit_n, open_, self.error_n)
 
 
 #: A retraction the limit slows below this is stalled [m/s]: measured on the tasks (expert, 1 s windows

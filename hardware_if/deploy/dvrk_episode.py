@@ -61,7 +61,9 @@ def dvrk_episode(
     reset()
     recorder.write("/deploy/event", {"kind": "episode_start", "episode": episode, "seed": seed})
     report.force_limit_n = chain.config.effective_force_limit_n
-    watch = ForceLimitWatch(report.force_limit_n, chain.control_period_s)
+    report.force_sensing_error_n = chain.config.force_sensing_error_n
+    # The console's measured force, not the tissue's: an excursion counts where the error bound cannot explain it.
+    watch = ForceLimitWatch(report.force_limit_n, chain.control_period_s, report.force_sensing_error_n)
     started = time.monotonic()
     peak = 0.0
     steps = 0

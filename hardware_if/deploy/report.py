@@ -60,6 +60,7 @@ class DeployReport:
     holds: int = 0
     invalid_actions: int = 0
     force_limit_n: float = float("nan")
+    force_sensing_error_n: float = 0.0
     force_limit_exceeded: int = 0
     force_over_limit_s: float = 0.0
     force_limit_stalls: int = 0
@@ -100,13 +101,19 @@ class DeployReport:
         out.append(f"  safety: {self.safety_stops} stop tick(s); interventions: {top}")
         out.append(f"  holds: {self.holds}; invalid actions: {self.invalid_actions}")
         out.append(f"  peak measured force {self.peak_force_n:.3f} N")
+        told = (
+            f" beyond the force sensing's {self.force_sensing_error_n:.2f} N error bound (all the measured force "
+            "can tell)"
+            if self.force_sensing_error_n > 0
+            else ""
+        )
         if self.force_limit_exceeded:
             out.append(
-                f"  FORCE LIMIT {self.force_limit_n:g} N EXCEEDED {self.force_limit_exceeded} x, "
+                f"  FORCE LIMIT {self.force_limit_n:g} N EXCEEDED{told} {self.force_limit_exceeded} x, "
                 f"{self.force_over_limit_s:.2f} s in all (events force_limit_exceeded in the recording)"
             )
         elif self.episodes:
-            out.append(f"  force limit {self.force_limit_n:g} N: never exceeded")
+            out.append(f"  force limit {self.force_limit_n:g} N: never exceeded{told}")
         else:
             out.append(f"  force limit {self.force_limit_n:g} N: no episode ran")
         if self.force_limit_stalls:

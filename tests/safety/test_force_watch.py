@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,6 +26,24 @@ def test_each_excursion_has_its_start_duration_and_peak() -> None:
     current = watch.all()[-1]
     assert current.open and current.peak_n == pytest.approx(1.3) and len(watch.all()) == 2
     assert watch.finish() is not None and len(watch.excursions) == 2 and not watch.above
+
+
+def test_with_an_inexact_sensor_only_what_its_error_cannot_explain_is_an_excursion() -> None:
+    """A dVRK's measured force is off by up to its error bound: 3 N over a 1 N limit with a 2.5 N bound could be
+    a true 0.5 N, and is no excursion; 4 N is, and its excess and ratio are the least the true force had. The
+    deploy's report says the limit was never exceeded beyond the bound, naming it."""
+    from hardware_if.deploy.report import DeployReport
+
+    watch = ForceLimitWatch(1.0, _PERIOD_S, error_n=2.5)
+    for i, f in enumerate([3.0, 3.4, 4.0, 3.0]):
+        watch.update(np.array([0.0, f, 0.0]), i * _PERIOD_S)
+    (excursion,) = watch.all()
+    assert excursion.duration_s == pytest.approx(_PERIOD_S) and excursion.peak_n == pytest.approx(4.0)
+    assert excursion.excess_n == pytest.approx(0.5) and excursion.ratio == pytest.approx(1.5)
+    assert excursion.to_event()["error_n"] == 2.5
+    report = DeployReport("dvrk", False, Path("run.mcap"), force_limit_n=1.0, force_sensing_error_n=2.5)
+    report.episodes.append({"episode": 0, "seed": 0, "steps": 1, "success": True, "peak_force_n": 4.0})
+    assert "force limit 1 N: never exceeded beyond the force sensing's 2.50 N error bound" in "\n".join(report.lines())
 
 
 def test_a_non_finite_force_counts_as_above_the_limit() -> None:
