@@ -17,16 +17,30 @@ TEXTURES = Path(__file__).resolve().parent / "data" / "textures"
 
 
 def test_train_perception_writes_its_model_report_and_picture(tmp_path: Path) -> None:
-    """A short budget prints the held-out error and the floor, and writes the model, report.json and frames.png."""
-    done = run_cli("train-perception", "--budget-s", "25", "--heldout", "10", "--any-colour", "--out", str(tmp_path))
+    """A short budget prints the held-out error and the floor, and writes the model, report.json and frames.png;
+    --vary's ranges, parsed as robustness parses them, are in its report."""
+    done = run_cli(
+        "train-perception", "--budget-s", "25", "--heldout", "10", "--any-colour", "--vary", "size=0.8:1.2x",
+        "--out", str(tmp_path),
+    )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "held-out site error (10 frames x 3 sites): median" in done.stdout
     assert "floor of the sites' offset (not visible on an unmarked flap)" in done.stdout
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["report"]["heldout_frames"] == 10 and report["mark_sites"] is False
-    assert report["any_colour"] is True
+    assert report["any_colour"] is True and report["vary"] == {
+        "tissue_size_m": [pytest.approx(0.064), pytest.approx(0.096)]
+    }
     assert (tmp_path / "site-estimator.safetensors").stat().st_size > 0
     assert (tmp_path / "frames.png").stat().st_size > 1000
+
+
+def test_train_perception_refuses_a_disturbance_in_vary_before_rendering(tmp_path: Path) -> None:
+    """A disturbance acts on observations and actions, never on a frame: named, nothing written."""
+    out = tmp_path / "model"
+    done = run_cli("train-perception", "--vary", "obs_white_m=0:0.001", "--out", str(out))
+    assert done.returncode == 1 and not out.exists(), done.stdout + done.stderr
+    assert "--vary='obs_white_m=0:0.001' is not allowed: expected the flap's parameters" in done.stderr
 
 
 def test_evaluate_with_the_camera_on_an_unseen_texture_reports_the_site_error(tmp_path: Path) -> None:

@@ -11,7 +11,7 @@ named places, for the error floor the invisible offset sets).
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -80,6 +80,7 @@ def render_frames(
     mark_sites: bool = False,
     textures: Sequence[str] = (),
     randomization: Mapping[str, tuple[float, float]] | None = None,
+    log_uniform: Iterable[str] = (),
     deadline_s: float = float("inf"),
 ) -> LabelledFrames:
     """Render ``frames_per_reset`` frames after each reset of ``task`` with the given seeds.
@@ -92,6 +93,7 @@ def render_frames(
         mark_sites: Ink the sites (:attr:`sim.tissue.TissueParams.mark_sites`).
         textures: Image files for the flap, used in turn (none: the procedural textures).
         randomization: Overrides of the task's randomization ranges (e.g. :data:`ANY_COLOUR`).
+        log_uniform: Those of them drawn log-uniformly, as a sweep's multiples are (``train-perception --vary``).
         deadline_s: Stop early at this :func:`time.monotonic` time (at least one reset is rendered).
     """
     start = time.monotonic()
@@ -107,6 +109,9 @@ def render_frames(
         )
         for path in sources
     }
+    if log_uniform:
+        for env in envs.values():
+            env.unwrapped.use_randomization(dict(randomization or {}), log_uniform)
     try:
         for index, seed in enumerate(seeds):
             env = list(envs.values())[index % len(envs)]

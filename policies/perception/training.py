@@ -27,6 +27,7 @@ import torch
 from policies.perception.frames import ANY_COLOUR, LabelledFrames, render_frames
 from policies.perception.network import SiteEstimator, SiteNet
 from sim.endoscope import Endoscope
+from sim.robustness import TrainingRanges
 
 __all__ = [
     "MAX_FRAMES",
@@ -156,6 +157,7 @@ def train_site_estimator(
     mark_sites: bool = False,
     textures: Sequence[str] = (),
     any_colour: bool = False,
+    vary: TrainingRanges | None = None,
     endoscope: Endoscope | None = None,
     progress: Callable[[str], None] = print,
     state: TrainingState | None = None,
@@ -171,6 +173,8 @@ def train_site_estimator(
         mark_sites: Ink the sites on the flap.
         textures: Image files for the flap (none: the procedural textures).
         any_colour: Train and measure on flaps of any colour (:data:`~policies.perception.frames.ANY_COLOUR`).
+        vary: Train and measure over these ranges (``--vary``, :func:`sim.robustness.training_ranges`), e.g. a
+            robustness sweep's stiffness and size; the flap's drawn as the sweep draws them.
         endoscope: The endoscope (default :class:`Endoscope`).
         progress: Receives one line per stage.
         state: Filled in as the training goes (the held-out frames, the estimator in training), for a
@@ -181,8 +185,10 @@ def train_site_estimator(
     endoscope = endoscope or Endoscope()
     deadline = started_s + budget_s
     options: dict[str, Any] = {"endoscope": endoscope, "mark_sites": mark_sites, "textures": textures}
-    if any_colour:
-        options["randomization"] = ANY_COLOUR
+    if any_colour or vary is not None:
+        options["randomization"] = {**(ANY_COLOUR if any_colour else {}), **(vary.randomization if vary else {})}
+    if vary is not None:
+        options["log_uniform"] = vary.log_uniform
     test = render_frames(
         task, [_HELDOUT_SEED_BASE + 10_000 * seed + i for i in range(heldout)], frames_per_reset=1, **options
     )
@@ -220,6 +226,7 @@ def train_site_estimator(
         mark_sites=mark_sites,
         textures=list(textures),
         any_colour=any_colour,
+        vary={name: list(r) for name, r in vary.randomization.items()} if vary is not None else {},
         report=report.to_dict(),
     )
     return estimator, report

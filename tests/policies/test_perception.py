@@ -17,6 +17,7 @@ from policies.perception import SHIPPED_MODEL, SHIPPED_MODELS, SiteEstimator, Si
 from policies.perception.frames import ANY_COLOUR
 from policies.perception.training import error_stats_mm, train_site_estimator
 from sim.endoscope import Endoscope
+from sim.robustness import parse_vary, training_ranges
 
 
 def test_frames_label_the_sites_in_the_camera_frame() -> None:
@@ -47,6 +48,24 @@ def test_any_colour_frames_show_flaps_the_tasks_pink_never_does() -> None:
     pink, any_colour = _site_colours(None), _site_colours(ANY_COLOUR)
     assert np.all(pink[:, 0] > pink[:, 1])
     assert np.any(any_colour[:, 1] > any_colour[:, 0])
+
+
+def _flap_pixels(vary: str) -> np.ndarray:
+    """How many of the left eye's pixels show the (pink) flap, on four flaps drawn over ``vary``'s ranges."""
+    ranges = training_ranges(parse_vary(vary))
+    frames = render_frames(
+        "multisite", list(range(31, 35)), frames_per_reset=1, randomization=ranges.randomization,
+        log_uniform=ranges.log_uniform,
+    )  # fmt: skip
+    left = frames.images[:, :3].astype(int)
+    return np.asarray(((left[:, 0] - left[:, 1]) > 40).sum(axis=(1, 2)))
+
+
+def test_frames_over_a_sweeps_ranges_show_its_flaps() -> None:
+    """train-perception --vary renders the flaps a sweep meets: the same four flaps at the sweep's largest size
+    (1.2 x) cover about (1.2 / 0.8)^2 = 2.25 x the image they cover at its smallest (measured 2.2-2.6 x)."""
+    small, large = _flap_pixels("size=0.8:0.8x"), _flap_pixels("size=1.2:1.2x")
+    assert np.all(large > 1.8 * small) and np.all(large < 3.0 * small), (small, large)
 
 
 def test_error_stats_are_distances_in_mm() -> None:

@@ -17,6 +17,9 @@ keep what it computed: the held-out frames (``--out/heldout-frames.npz``: ``imag
 ``--mark-sites`` inks the sites on the flap (a surgeon's marker): the offset becomes visible, and the
 commands that use the model ink them too. ``--texture FILE ...`` trains on your own flap images
 instead of the procedural textures.
+``--vary`` trains over ranges as ``robustness --vary`` names them (e.g. the sweep's
+``stiffness=0.3:3x,size=0.8:1.2x``): an estimator trained on the tasks' own flaps misses the site by more on
+a sweep's larger and softer ones.
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ import imageio.v2 as imageio
 import numpy as np
 
 import sim.envs
+from psm_control.errors import ConfigurationError
+from sim.robustness import TrainingRanges, parse_vary, training_ranges
 from sim.sweep.stopping import handling
 from tissue_retract.cli._camera import check_texture
 from tissue_retract.cli._checks import check_out_folder, float_in, int_in
@@ -78,6 +83,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="train and measure on flaps of any colour (each channel 0.15-1), not only the tasks' pink ones",
     )
+    parser.add_argument(
+        "--vary",
+        default=None,
+        help="train and measure over these ranges, as robustness's --vary takes them (the same names and parser), "
+        "e.g. stiffness=0.3:3x,size=0.8:1.2x: the flaps a sweep with them meets; only what changes a frame "
+        "(the flap's size, stiffness, thickness, density, placement) changes the frames",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -86,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     task = sim.envs.gym_id(args.task)
     textures = [check_texture(path) for path in args.texture]
     out = Path(args.out)
+    vary = _ranges(args.vary)
     check_out_folder(out, [_MODEL, _PARTIAL_MODEL, _HELDOUT, "report.json", "frames.png"], textures)
     from policies.perception import train_site_estimator  # torch: imported once the arguments are good
     from policies.perception.training import TrainingState
@@ -105,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
                 mark_sites=args.mark_sites,
                 textures=textures,
                 any_colour=args.any_colour,
+                vary=vary,
                 progress=lambda line: print(line, flush=True),
                 state=state,
             )
@@ -131,6 +145,18 @@ def run(args: argparse.Namespace) -> int:
     write_frames_picture(out / "frames.png", estimator)
     print(f"frames: {out / 'frames.png'} (held-out frames; true sites green, estimates blue)")
     return 0
+
+
+def _ranges(vary: str | None) -> TrainingRanges | None:
+    """``--vary``'s ranges, parsed as ``robustness`` and ``train`` parse them; a disturbance is refused (it acts on
+    an episode's observations and actions, never on a frame)."""
+    if not vary:
+        return None
+    ranges = training_ranges(parse_vary(vary))
+    if ranges.disturbances:
+        names = ", ".join(r.name for r in ranges.disturbances)
+        raise ConfigurationError("--vary", vary, f"the flap's parameters ({names}: a disturbance draws no frame)")
+    return ranges
 
 
 def _keep(out: Path, state: Any, args: argparse.Namespace) -> str:
