@@ -64,7 +64,7 @@ _MAX_HOLDS = 20
 #: A new target for the chain every this many ticks (the policies' 10 Hz at the dVRK's 100 Hz).
 _TICKS_PER_TARGET = 10
 #: The jaws during the excitation: open, as at an episode's start.
-EXCITATION_JAW_RAD = EnvConfig().jaw_open_rad
+_EXCITATION_JAW_RAD = EnvConfig().jaw_open_rad
 #: Log layouts (:mod:`hardware_if.wrench.joint_logs`) recorded on real PSMs: the public WPI and radiang logs.
 _REAL_PSM_LAYOUTS = {"wpi", "radiang"}
 
@@ -130,7 +130,7 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
             # An arm that fell behind (a slow console) is led back to the wave, within what the chain accepts.
             reach = 0.5 * chain.config.max_translation_m
             step *= min(1.0, reach / max(float(np.linalg.norm(step)), 1e-12))
-            chain.set_target(CartesianDelta(step, yaw, EXCITATION_JAW_RAD, "local"), measured)
+            chain.set_target(CartesianDelta(step, yaw, _EXCITATION_JAW_RAD, "local"), measured)
         output = chain.tick(measured)
         if output.safety_stop:
             raise RuntimeError(f"the control chain stopped the excitation: {output.reason}")
@@ -168,7 +168,7 @@ def _to_start(client: Any, wait_s: float) -> None:
     """
     from hardware_if.client.arm_pose import return_to_start
 
-    reason = return_to_start(client, PsmModel().home(), wait_s, start_jaw=EXCITATION_JAW_RAD)
+    reason = return_to_start(client, PsmModel().home(), wait_s, start_jaw=_EXCITATION_JAW_RAD)
     if reason:
         raise RuntimeError(f"the arm did not reach the excitation's start: {reason}")
 
