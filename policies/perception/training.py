@@ -184,11 +184,13 @@ def train_site_estimator(
     torch.manual_seed(seed)
     endoscope = endoscope or Endoscope()
     deadline = started_s + budget_s
-    options: dict[str, Any] = {"endoscope": endoscope, "mark_sites": mark_sites, "textures": textures}
-    if any_colour or vary is not None:
-        options["randomization"] = {**(ANY_COLOUR if any_colour else {}), **(vary.randomization if vary else {})}
-    if vary is not None:
-        options["log_uniform"] = vary.log_uniform
+    options: dict[str, Any] = {
+        "endoscope": endoscope,
+        "mark_sites": mark_sites,
+        "textures": textures,
+        "randomization": {**(ANY_COLOUR if any_colour else {}), **(vary.randomization if vary is not None else {})},
+        "log_uniform": vary.log_uniform if vary is not None else (),
+    }
     test = render_frames(
         task, [_HELDOUT_SEED_BASE + 10_000 * seed + i for i in range(heldout)], frames_per_reset=1, **options
     )
