@@ -6,8 +6,9 @@ not deterministic (its control ticks land at other physics times than the in-pro
 distances differ by a few millimetres), so the test states its tolerance on what a user sees: the ROS
 success is within the in-process 95 % interval (the bench's exit status), and the two paths agree on the
 success of all episodes but at most one. The episodes' own ends are events the bench waits for (the
-deploy's exit, the recording), never a sleep; the deadman is widened as in the other deploys of this
-folder, since the suite runs on a loaded machine.
+deploy's exit, the recording), never a sleep; the deadman and the policy budget are widened as in the
+other deploys of this folder, since the suite runs on a loaded machine (where a descheduled deploy's
+policy step once took 51 ms against the default 50 ms budget, and the run held).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ def test_a_rehearsal_through_ros_succeeds_as_often_as_in_process(ros_env: dict[s
     out = tmp_path / "rehearsal.json"
     command = [sys.executable, "-m", "tissue_retract", "bench", "rehearsal", "--tasks", "lift", "--modes", "topics"]
     command += ["--episodes", str(EPISODES), "--domain-id", ros_env["ROS_DOMAIN_ID"], "--safety-config", str(config)]
+    command += ["--policy-budget", "600"]
     done = subprocess.run([*command, "--json", str(out)], env=ros_env, capture_output=True, text=True, timeout=900)
     assert done.returncode in (0, 1), done.stdout + done.stderr
     (row,) = json.loads(out.read_text())["rows"]

@@ -31,8 +31,11 @@ def test_sim_dvrk_unknown_task_is_refused(ros_env: dict[str, str]) -> None:
 def test_bench_ros_prints_latency_and_drops(ros_env: dict[str, str], tmp_path: Path) -> None:
     """bench ros prints p50/p99 and drops per rate and writes them as JSON (numbers are not asserted)."""
     out = tmp_path / "bench.json"
-    env = {**ros_env, "ROS_DOMAIN_ID": str(commander_domain_id())}  # its /psm1_client must not outlive it here
-    result = _cli(env, "bench", "ros", "--rates", "100", "--duration", "0.5", "--json", str(out))
+    # Its /psm1_client must not outlive it on the worker's own domain; and a bench left to pick its own domain
+    # (from its process id) can pick another worker's, where a fault's deploy would meet its arm.
+    domain = str(commander_domain_id())
+    command = ("bench", "ros", "--rates", "100", "--duration", "0.5", "--domain-id", domain, "--json", str(out))
+    result = _cli({**ros_env, "ROS_DOMAIN_ID": domain}, *command)
     assert result.returncode == 0, result.stderr
     assert "p50" in result.stdout and "p99" in result.stdout and "drops" in result.stdout
     report = json.loads(out.read_text())

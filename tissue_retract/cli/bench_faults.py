@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hardware_if.common.network import apply_local_ros_env, run_domain_id
 from sim.strict_json import write_strict_json
+from tissue_retract.cli._ros import add_bench_domain_argument, bench_domain_id
 
 __all__ = ["add_arguments", "run"]
 
@@ -28,12 +28,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--only", metavar="TEXT", default=None, help="run only the faults whose name contains TEXT (default: all)"
     )
     parser.add_argument("--keep", metavar="DIR", default=None, help="keep each fault's recording and output in DIR")
+    add_bench_domain_argument(parser)  # the first fault's; each next fault takes the next domain
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the matrix, print the table, return 0 when every fault ended as expected."""
-    base = run_domain_id()
-    apply_local_ros_env(base)  # before rclpy starts (the injector runs in this process)
+    base = bench_domain_id(args)  # before rclpy starts (the injector runs in this process)
     from tissue_retract.faults import FAULTS, run_fault, scratch_dir
 
     faults = [f for f in FAULTS if args.only is None or args.only in f.name]

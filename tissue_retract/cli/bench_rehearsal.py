@@ -40,10 +40,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hardware_if.common.network import apply_local_ros_env, run_domain_id
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success, wilson_interval
-from tissue_retract.cli._checks import int_in
+from tissue_retract.cli._checks import float_in, int_in
+from tissue_retract.cli._ros import add_bench_domain_argument, bench_domain_id
 
 __all__ = ["MODES", "add_arguments", "run"]
 
@@ -72,11 +72,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--seed", type=int_in(0, 2**31 - 2000), default=7400, help="first episode's seed (default 7400)"
     )
-    parser.add_argument(
-        "--domain-id", type=int_in(1, 101), default=None, help="ROS_DOMAIN_ID of the run (default: one of its own)"
-    )
+    add_bench_domain_argument(parser)
     parser.add_argument(
         "--safety-config", metavar="FILE", default=None, help="a safety configuration for the deploys (TOML/YAML)"
+    )
+    parser.add_argument(
+        "--policy-budget",
+        type=float_in(0.0, 3600.0, open_low=True),
+        default=None,
+        metavar="SECONDS",
+        help="the deploys' longest policy step before the arm is held (default: one policy period, as deploy's)",
     )
 
 
@@ -179,6 +184,8 @@ def _deploy(task: str, seed: int, episodes: int, record: Path, args: argparse.Na
     command += ["--domain-id", os.environ["ROS_DOMAIN_ID"], "--wait", "60", *extra]
     if args.safety_config is not None:
         command += ["--safety-config", args.safety_config]
+    if args.policy_budget is not None:
+        command += ["--policy-budget", str(args.policy_budget)]
     done = subprocess.run(
         command, capture_output=True, text=True, timeout=60.0 + _DEPLOY_S_PER_EPISODE * episodes, check=False
     )
@@ -315,8 +322,7 @@ def _peak(episodes: Sequence[dict[str, Any]]) -> float:
 
 def run(args: argparse.Namespace) -> int:
     """Deploy through ROS and evaluate in-process per task and mode; print both; 1 when ROS falls short."""
-    domain_id = args.domain_id if args.domain_id is not None else run_domain_id()
-    apply_local_ros_env(domain_id)
+    domain_id = bench_domain_id(args)
     seeds = [args.seed + k for k in range(args.episodes)]
     rows = []
     short = []

@@ -19,11 +19,11 @@ from typing import Any
 
 import numpy as np
 
-from hardware_if.common.network import apply_local_ros_env, run_domain_id
 from hardware_if.common.session import ros_session
 from psm_control.commands import JointCommand
 from sim.strict_json import write_strict_json
 from tissue_retract.cli._checks import float_in
+from tissue_retract.cli._ros import add_bench_domain_argument, bench_domain_id
 
 __all__ = ["add_arguments", "run"]
 
@@ -39,6 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--duration", type=float_in(0.1, 3600.0), default=5.0, help="streaming time per rate [s] (default: 5)"
     )
+    add_bench_domain_argument(parser)
 
 
 def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str, Any]:
@@ -127,7 +128,7 @@ def _ms(value: float | None) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Measure and print the round trip at each rate."""
-    apply_local_ros_env(run_domain_id())
+    bench_domain_id(args)
 
     env = dict(os.environ)
     results = []
