@@ -62,7 +62,7 @@ def add_perception_argument(parser: argparse.ArgumentParser) -> None:
         help="Tasks I-III: the observation's site from the site estimator on the endoscope's stereo images "
         "(MODEL: a train-perception model file; pink or any-colour: the shipped one trained on the tasks' pink "
         "flaps, or on flaps of any colour; default: both shipped ones, the pink one's site where the any-colour "
-        "one agrees within 2 mm, else the any-colour one's), a jaw-sensed grasp",
+        "one agrees within 4 mm, else the any-colour one's), a jaw-sensed grasp",
     )
 
 
