@@ -9,10 +9,10 @@ pink one knows they agree, and where they do not the pink one has left what it k
 
 Measured on MultiSite with the shipped camera policy, 100 episodes each (``evaluate --policy pretrained
 --task multisite --episodes 100 --seeds 51 --perception camera[:pink|:any-colour] [--texture F]``; the true
-site: 98 %): on the tasks' pink flaps 92 % (pink alone 95, any-colour alone 90), the pink one's site taken
-in 83 episodes; on three tissue-like textures made for the check, none of them trained on (a dark red
-mottled "liver", yellow "fat" with red vessels, a beige "serosa" with a vessel tree): 92, 89 and 91 %
-(pink alone 95, 20 and 54 %; any-colour alone 92, 89 and 90 %).
+site's policy: 97 %): on the tasks' pink flaps 96 % (pink alone 96, any-colour alone 99), the pink one's
+site taken in 99 episodes; on three tissue-like textures made for the check, none of them trained on (a dark
+red mottled "liver", yellow "fat" with red vessels, a beige "serosa" with a vessel tree): 98, 91 and 92 %
+(pink alone 98, 19 and 34 %; any-colour alone 100, 94 and 95 %).
 """
 
 from __future__ import annotations
