@@ -173,3 +173,21 @@ def test_the_default_estimator_takes_the_pink_one_on_pink_flaps_and_the_any_colo
         env.close()
     assert sum(info["site_estimator"] == chosen for info in infos) >= at_least, [i["site_estimator"] for i in infos]
     assert np.median([info["site_error_mm"] for info in infos]) < 5.0
+
+
+def test_the_chooser_reads_the_flaps_colour_about_the_sites_in_view() -> None:
+    """``flap_red_over_green``: the mean colour about the sites the camera sees; NaN when it sees none."""
+    from policies.perception.chooser import flap_red_over_green
+    from sim.endoscope import StereoFrame
+
+    left = np.zeros((96, 128, 3), dtype=np.uint8)
+    left[:, :64] = (200, 100, 100)  # a pink left half, a green right half
+    left[:, 64:] = (60, 160, 60)
+    intrinsics = np.array([[100.0, 0.0, 64.0], [0.0, 100.0, 48.0], [0.0, 0.0, 1.0]])
+    frame = StereoFrame(left, left, np.eye(4), intrinsics, 0.005, np.ones((96, 128)), np.zeros((96, 128), int))
+    pink_site, green_site = np.array([-0.02, 0.0, 0.1]), np.array([0.02, 0.0, 0.1])  # 20 px either side
+    assert flap_red_over_green(frame, pink_site[None]) == pytest.approx(0.25)
+    assert flap_red_over_green(frame, green_site[None]) == pytest.approx(-100 / 280)
+    behind, outside = np.array([0.0, 0.0, -0.1]), np.array([1.0, 0.0, 0.1])
+    assert flap_red_over_green(frame, np.stack([pink_site, behind, outside])) == pytest.approx(0.25)
+    assert np.isnan(flap_red_over_green(frame, np.stack([behind, outside])))

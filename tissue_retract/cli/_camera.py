@@ -61,8 +61,8 @@ def add_perception_argument(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="Tasks I-III: the observation's site from the site estimator on the endoscope's stereo images "
         "(MODEL: a train-perception model file; pink or any-colour: the shipped one trained on the tasks' pink "
-        "flaps, or on flaps of any colour; default: both shipped ones, the pink one's site where the any-colour "
-        "one agrees within 4 mm, else the any-colour one's), a jaw-sensed grasp",
+        "flaps, or on flaps of any colour; default: both shipped ones, the pink one's site where the flap about it "
+        "looks pink, else the any-colour one's), a jaw-sensed grasp",
     )
 
 
@@ -96,6 +96,6 @@ def texture_warning(estimator: Any, texture: str | None) -> str:
     return (
         f"WARNING: the flap shows {Path(texture).name}, but the site estimator was trained on the tasks' pink flaps "
         "only: on a flap that looks otherwise it can miss the site by centimetres. Use --perception camera (it "
-        "takes the any-colour estimator where the two disagree), camera:any-colour, or a model from "
+        "takes the any-colour estimator where the flap does not look pink), camera:any-colour, or a model from "
         "train-perception --texture on photographs of this flap."
     )
