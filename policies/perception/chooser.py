@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from policies.perception.frames import camera_points
 from policies.perception.network import SiteEstimator, load_estimator
 from sim.endoscope import StereoFrame
 
@@ -44,11 +45,9 @@ PINK, ANY_COLOUR = "pink", "any-colour"
 def flap_red_over_green(frame: StereoFrame, world_sites: np.ndarray) -> float:
     """``(r - g) / (r + g + b)`` of the left image's mean colour about ``world_sites`` (N, 3) [m]; NaN if none
     of them is in view."""
-    camera_from_world = np.linalg.inv(frame.world_from_camera)
     height, width = frame.left.shape[:2]
     pixels = []
-    for point in np.asarray(world_sites, dtype=float):
-        in_camera = camera_from_world[:3, :3] @ point + camera_from_world[:3, 3]
+    for in_camera in camera_points(frame, np.asarray(world_sites, dtype=float).reshape(-1, 3)):
         if in_camera[2] <= 0.0:
             continue
         u, v, _ = frame.intrinsics @ (in_camera / in_camera[2])
