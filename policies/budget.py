@@ -1,11 +1,11 @@
 """A training run's wall-clock budget (``train --budget-s``): what still fits, and when to stop.
 
 The budget covers the whole command, the interpreter's start included. Every phase asks it before a unit
-of work: a chunk of demonstrations, a chunk of pretraining (these two within the first half of the budget),
-a training episode, an evaluation episode. On
-a loaded machine the estimates are the last measured ones, and an evaluation that would run past the end
-is cut short (its success rate is then over the episodes it ran), so a run ends within about one such
-unit of its budget.
+of work: a chunk of demonstrations, a chunk of pretraining (these two within the preparation's share of the
+budget, the demonstrations stopping early enough for all of the pretraining, timed on the first of them),
+a training episode, an evaluation episode. On a loaded machine the estimates are the last measured ones,
+and an evaluation that would run past the end is cut short (its success rate is then over the episodes it
+ran), so a run ends within about one such unit of its budget.
 """
 
 from __future__ import annotations
@@ -54,6 +54,8 @@ class Budget:
         self.episode_s = 0.0
         self.step_s = 0.0
         self.evaluation_s: float | None = None
+        #: What the pretraining after the demonstrations will take [s], once timed: kept free by them.
+        self.pretraining_s = 0.0
 
     def elapsed(self) -> float:
         """Seconds since the budget started."""
@@ -72,6 +74,13 @@ class Budget:
     def preparing_fits(self) -> bool:
         """More demonstrations or pretraining fit: less than the preparation's share of the budget is spent."""
         return self.budget_s is None or self.elapsed() < self.preparation_share * self.budget_s
+
+    def demonstrations_fit(self) -> bool:
+        """More demonstrations fit: they and the pretraining after them (:attr:`pretraining_s`) end within the
+        preparation's share of the budget."""
+        if self.budget_s is None:
+            return True
+        return self.elapsed() + self.pretraining_s < self.preparation_share * self.budget_s
 
     def fits_episode(self, eval_episodes: int, horizon: int) -> bool:
         """One more episode and the last evaluation end within the budget (always, without a budget)."""

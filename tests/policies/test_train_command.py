@@ -17,10 +17,11 @@ import pytest
 from policies.algos import Dims, make_agent
 from policies.budget import FINISH_RESERVE_S, Budget
 from policies.checkpoint import load_checkpoint, load_policy
+from policies.collect import SerialCollector
 from policies.config import ALGORITHMS, TrainConfig
 from policies.recipe import DEFAULT_RECIPE, ROBUST_RECIPE
 from policies.toy_env import TOY_TASK_ID
-from policies.trainer import RunSpec, ensure_registered, evaluate, train
+from policies.trainer import RunSpec, _demonstrations, ensure_registered, evaluate, train
 from psm_control.errors import ConfigurationError
 from tissue_retract.cli import main
 
@@ -238,6 +239,28 @@ def test_demonstrations_stop_when_the_budget_ends_and_progress_is_shown(
     line = next(line for line in captured.out.splitlines() if line.startswith("demonstrations: "))
     assert int(line.split()[1]) < 100000 and "of 100000 (the budget ended their collection)" in line
     assert "budget 6 s:" in captured.out
+
+
+@pytest.mark.parametrize(("pretraining_s", "collected"), [(0.0, 40), (999.0, 10)])
+def test_demonstrations_leave_the_budget_room_for_the_pretraining_after_them(
+    pretraining_s: float, collected: int
+) -> None:
+    """Timed on the first chunk, a pretraining that needs the rest of the preparation's share stops the
+    collection there; one that needs nothing lets it finish."""
+    spec = RunSpec(TOY_TASK_ID, seed=2, demos=40)
+    env = gym.make(ensure_registered(TOY_TASK_ID))
+    budget = Budget(2000.0, started_s=0.0, clock=lambda: 1.0, preparation_share=0.5)
+    timed: list[int] = []
+
+    def pretraining(demos: list[Any]) -> float:
+        timed.append(len(demos))
+        return pretraining_s
+
+    try:
+        demos = _demonstrations(spec, env, Dims(*_toy_dims(env)), SerialCollector(env), budget, None, pretraining)
+    finally:
+        env.close()
+    assert len(demos) == collected and timed == [10] and budget.pretraining_s == pretraining_s
 
 
 def test_a_budget_outside_its_range_is_refused_with_what_is_allowed(capsys: pytest.CaptureFixture[str]) -> None:

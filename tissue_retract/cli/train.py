@@ -223,8 +223,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"episode {episode:6d}: success {100 * success:5.1f} %")
     if result.stopped_early:
         print(f"stopped at episode {result.policy_episode}: held-out success reached the recipe's target")
+    demos_in_use = bool(result.demos_used) and config.uses_demos
     if args.demos and result.demos_used < args.demos and args.demos_file is None and config.uses_demos:
         print(f"demonstrations: {result.demos_used} of {args.demos} (the budget ended their collection)")
+    if demos_in_use and result.pretrain_steps < config.pretrain_steps and not result.resumed_from:
+        print(f"pretraining: {result.pretrain_steps} of {config.pretrain_steps} updates (the budget ended it)")
     for episode, ran in result.cut_evaluations:
         print(f"evaluation at episode {episode}: {ran} of {args.eval_episodes} episodes (the budget cut it short)")
     if args.budget_s is not None:
