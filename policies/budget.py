@@ -71,16 +71,15 @@ class Budget:
             return False
         return self.elapsed() + keep_s + FINISH_RESERVE_S > self.budget_s
 
-    def preparing_fits(self) -> bool:
-        """More demonstrations or pretraining fit: less than the preparation's share of the budget is spent."""
-        return self.budget_s is None or self.elapsed() < self.preparation_share * self.budget_s
+    def preparing_fits(self, keep_s: float = 0.0) -> bool:
+        """More demonstrations or pretraining fit: less than the preparation's share of the budget, less
+        ``keep_s``, is spent."""
+        return self.budget_s is None or self.elapsed() + keep_s < self.preparation_share * self.budget_s
 
     def demonstrations_fit(self) -> bool:
         """More demonstrations fit: they and the pretraining after them (:attr:`pretraining_s`) end within the
         preparation's share of the budget."""
-        if self.budget_s is None:
-            return True
-        return self.elapsed() + self.pretraining_s < self.preparation_share * self.budget_s
+        return self.preparing_fits(self.pretraining_s)
 
     def fits_episode(self, eval_episodes: int, horizon: int) -> bool:
         """One more episode and the last evaluation end within the budget (always, without a budget)."""

@@ -289,15 +289,21 @@ def _pretraining_s(dims: Dims, config: TrainConfig, reward_fn: RewardFn, horizon
     """What ``config.pretrain_steps`` pretraining updates will take [s]: a second chunk of
     :data:`PRETRAIN_CHUNK` on a throwaway agent over ``demos`` (the first warms up), scaled up. An update's
     cost is its batch's, not the demonstrations' number."""
-    agent = make_agent(dims, config)
-    buffer = EpisodeBuffer(len(demos) * horizon, horizon, dims.obs, dims.goal, dims.action)
+    agent, buffer = make_agent(dims, config), _demo_buffer(demos, dims, horizon)
     for episode in demos:
-        buffer.add(episode)
         agent.observe_episode(episode.obs, episode.achieved_goal, episode.desired_goal)
     agent.pretrain(buffer, reward_fn, PRETRAIN_CHUNK)
     started = time.monotonic()
     agent.pretrain(buffer, reward_fn, PRETRAIN_CHUNK)
     return (time.monotonic() - started) * config.pretrain_steps / PRETRAIN_CHUNK
+
+
+def _demo_buffer(demos: list[Episode], dims: Dims, horizon: int) -> EpisodeBuffer:
+    """A buffer holding exactly ``demos``."""
+    buffer = EpisodeBuffer(len(demos) * horizon, horizon, dims.obs, dims.goal, dims.action)
+    for episode in demos:
+        buffer.add(episode)
+    return buffer
 
 
 class _Logger:
@@ -381,24 +387,14 @@ def _train(
     if config.uses_demos:
         demo_bar = tqdm(total=spec.demos, desc="demonstrations", unit="ep") if spec.progress and spec.demos else None
         try:
-            timed = functools.partial(_pretraining_s, dims, config, reward_fn, horizon)
-            demos = _demonstrations(
-                spec,
-                env,
-                dims,
-                collector,
-                budget,
-                demo_bar.update if demo_bar else None,
-                timed if config.pretrain_steps else None,
+            timed = (
+                functools.partial(_pretraining_s, dims, config, reward_fn, horizon) if config.pretrain_steps else None
             )
+            demos = _demonstrations(spec, env, dims, collector, budget, demo_bar.update if demo_bar else None, timed)
         finally:
             if demo_bar is not None:
                 demo_bar.close()
-    demo_buffer = None
-    if demos:
-        demo_buffer = EpisodeBuffer(len(demos) * horizon, horizon, dims.obs, dims.goal, dims.action)
-        for episode in demos:
-            demo_buffer.add(episode)
+    demo_buffer = _demo_buffer(demos, dims, horizon) if demos else None
 
     start_episode, env_steps, pretrained = 0, 0, 0
     if spec.resume and resume_path.exists():
