@@ -14,7 +14,10 @@ space a page at a time, and a write that tore within the file's last page frees 
 room for its last records from the start: a hidden file beside it (``.<name>.reserve``) of
 :data:`RESERVE_BYTES`, allocated when the recording opens (a disk without that much room is a hold before
 anything moves) and removed when a write fails (its room then takes the hold and the report) or the file
-closes. A killed run leaves it behind; it holds no data.
+closes. A killed run leaves it behind; it holds no data. A process's own file-size limit (``ulimit -f``,
+``RLIMIT_FSIZE``) is a bound no reserve file can help with: the file stops taking data
+:data:`RESERVE_BYTES` short of it, with the error the system would give there (EFBIG), so the room for the
+hold is below the limit wherever the last chunk happened to end.
 
 Every such error becomes :class:`RecordingError`, a hold (``recording failed: <path>: <os error>``).
 """
@@ -24,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import resource
 from pathlib import Path
 
 from hardware_if.common.errors import HoldError
@@ -79,6 +83,10 @@ class CheckedFile:
         self._identity = (stat.st_dev, stat.st_ino)
         self._position = 0
         self.good = 0
+        soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+        #: Bytes of data the file takes before it fails as at the process's file-size limit (None: no limit).
+        self._data_limit = None if soft == resource.RLIM_INFINITY else max(0, soft - RESERVE_BYTES)
+        self._after_failure = False
 
     def _reserve(self) -> None:
         """Allocate :data:`RESERVE_BYTES` beside the file (blocks, not a sparse file: the room is taken now)."""
@@ -103,6 +111,8 @@ class CheckedFile:
             OSError: The system refused part of it (the file then ends in a torn write until :meth:`rewind`).
         """
         view = memoryview(data)
+        if self._data_limit is not None and not self._after_failure and self._position + len(view) > self._data_limit:
+            raise OSError(errno.EFBIG, os.strerror(errno.EFBIG), str(self.path))
         while view:
             written = os.write(self._fd, view)
             if written <= 0:  # a regular file never says 0 without an error; do not loop on it
@@ -139,6 +149,7 @@ class CheckedFile:
 
     def append(self, data: bytes) -> bool:
         """Add whole records after a failure: True when written, False (and nothing added) when not."""
+        self._after_failure = True  # into the room kept below a file-size limit
         self.rewind()
         try:
             self.write(data)

@@ -121,6 +121,27 @@ recorder.close()
     assert recording.truncated and recording.messages[-1][2]["kind"] == "hold"
 
 
+def test_the_hold_fits_below_a_file_size_limit_wherever_the_last_write_ended(tmp_path: Path) -> None:
+    """A write that ended 100 bytes short of the file-size limit still leaves room for the hold after it."""
+    path = tmp_path / "run.bin"
+    script = f"""
+import resource, signal
+from hardware_if.recording.checked_file import CheckedFile
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+limit = 300_000
+resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+checked = CheckedFile(__import__("pathlib").Path({str(path)!r}))
+try:
+    checked.write(bytes(limit - 100))
+    checked.write(bytes(10_000))
+except OSError as e:
+    print(e.errno == __import__("errno").EFBIG, checked.append(bytes(1000)))
+checked.close()
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.stdout.split() == ["True", "True"], done.stdout + done.stderr
+
+
 def test_vanished_folder_is_a_hold(tmp_path: Path) -> None:
     """The recording's folder removed mid-run: the next flush holds instead of writing into nowhere."""
     path = tmp_path / "runs" / "run.mcap"
