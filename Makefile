@@ -44,7 +44,7 @@ install-dev: $(VENV)/.installed-dev $(VENV)/.installed-ros $(VENV)/.installed-py
 # The main job: the shipped Task III policy deployed in the simulation through the safety chain.
 run: install
 	$(BIN)/tissue-retract deploy --policy pretrained --target sim --task multisite --episodes 20 --seed 1000 \
-		--record runs/make-run.mcap
+		--record runs/make-run.mcap --force
 
 # The dVRK's own Python client (crtk, dvrk), run by tests/ros against sim-dvrk, is not part of the
 # package: tests/ros/dvrk_client.py finds it ($DVRK_CLIENT_DIR, else shared/dvrk-client nearby).

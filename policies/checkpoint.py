@@ -23,9 +23,7 @@ from __future__ import annotations
 
 import itertools
 import json
-import os
 import struct
-import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -42,6 +40,7 @@ from policies.errors import CheckpointError, SpaceMismatchError
 from psm_control import __version__
 from psm_control.errors import ConfigurationError, InputFileError
 from psm_control.inputs import check_regular_file
+from psm_control.outputs import atomic_path
 
 __all__ = [
     "FORMAT",
@@ -205,14 +204,8 @@ def save_checkpoint(
         meta["rng"] = dict(rng or {})
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    os.close(fd)
-    try:
-        save_file(tensors, tmp, metadata={_META_KEY: json.dumps(meta)})
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_path(path, "checkpoint") as temporary:
+        save_file(tensors, str(temporary), metadata={_META_KEY: json.dumps(meta)})
     return path
 
 

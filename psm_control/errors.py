@@ -16,6 +16,8 @@ __all__ = [
     "JointLimitError",
     "JointVectorError",
     "NotBuiltError",
+    "OutputFileError",
+    "OutputWriteError",
     "SafetyStopError",
     "TissueRetractError",
     "UnknownVariantError",
@@ -52,6 +54,39 @@ class InputFileError(ConfigurationError):
     def __init__(self, field: str, path: object, allowed: str) -> None:
         self.path = str(path)
         super().__init__(field, self.path, allowed)
+
+
+class OutputFileError(ConfigurationError):
+    """A path the user named for an output cannot be used: a device, a FIFO, a folder, one of the inputs,
+    an existing recording without the user's word, a folder that cannot be made or written.
+
+    Raised before any work starts, so nothing is lost and nothing at the path is touched.
+
+    Attributes:
+        path: The path, as given.
+    """
+
+    def __init__(self, field: str, path: object, allowed: str) -> None:
+        self.path = str(path)
+        super().__init__(field, self.path, allowed)
+
+
+class OutputWriteError(TissueRetractError):
+    """An output file could not be written (a full disk, a file-size limit, a quota, a write error).
+
+    The path is left as it was: the old file, or none; never an empty or partial one.
+
+    Attributes:
+        field: The option that named the file (``--json``), or a description of the file.
+        path: The file.
+        reason: What the system said (``No space left on device (ENOSPC)``).
+    """
+
+    def __init__(self, field: str, path: object, reason: str) -> None:
+        self.field = field
+        self.path = str(path)
+        self.reason = reason
+        super().__init__(f"could not write {field} {self.path!r}: {reason}; nothing was written there")
 
 
 class UnknownVariantError(ConfigurationError):

@@ -4,7 +4,8 @@ Every file a user names (a safety configuration, demonstrations, a checkpoint) g
 it is parsed, so that a device (``/dev/zero``), a FIFO, a huge file, a UTF-16 file or a YAML alias bomb
 gets a :class:`~psm_control.errors.InputFileError` naming the file and what is allowed, instead of a hang,
 unbounded memory or a traceback. Output paths are checked here too, before any work starts: their
-folder is created, and an output never replaces one of the run's inputs.
+folder is created, and an output never replaces a device, a FIFO, a folder, one of the run's inputs, or an
+existing recording without the user's word (:func:`check_output_path`).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from psm_control.errors import ConfigurationError, InputFileError
+from psm_control.errors import InputFileError, OutputFileError
 
 __all__ = [
     "MAX_CONFIG_BYTES",
@@ -110,28 +111,54 @@ def load_yaml(text: str, field: str, path: str | Path) -> Any:
         raise InputFileError(field, path, "YAML nested at most a few hundred levels") from e
 
 
-def check_output_path(path: str | Path, field: str, inputs: Iterable[str | Path | None] = ()) -> Path:
-    """Make an output file's folder and refuse a path that is a folder or one of the run's inputs.
+def check_output_path(
+    path: str | Path,
+    field: str,
+    inputs: Iterable[str | Path | None] = (),
+    *,
+    existing: str | None = None,
+) -> Path:
+    """Check an output path before any work starts, and make its folder.
 
-    Called before any work starts, so a bad ``--json`` or ``--record`` loses nothing.
+    Refused: an existing path that is not a regular file (a folder, a device such as ``/dev/null``, a FIFO,
+    a socket, or a symlink to one), one of the run's ``inputs`` (the same file by path or inode), and, when
+    ``existing`` says what is allowed instead, any existing path (a recording the user did not ask to
+    replace). An existing regular result file is otherwise replaced when the command is done
+    (:func:`psm_control.outputs.write_atomic`).
+
+    Args:
+        path: The output, as given.
+        field: The option that named it (``--json``).
+        inputs: The run's input files (None entries are skipped).
+        existing: What is allowed when ``path`` exists, e.g. ``"a new file (--force replaces it)"``; None
+            lets an existing regular file be replaced.
 
     Raises:
-        ConfigurationError: The path is a folder, an input, or its folder cannot be created or written.
+        OutputFileError: Naming ``field``, the path and what is allowed.
     """
+    from psm_control.outputs import special_file_kind  # the writer's own test, re-run before its rename
+
     path = Path(path)
-    if path.is_dir():
-        raise ConfigurationError(field, str(path), "a file path, not a folder")
+    kind = special_file_kind(path)
+    if kind is not None:
+        allowed = "a new path" if existing is not None else "a new or regular file"
+        raise OutputFileError(field, str(path), f"{allowed}, not a folder, device, FIFO or socket (this is a {kind})")
     for given in inputs:
         if given is None:
             continue
         source = Path(given)
-        same = source.exists() and path.exists() and os.path.samefile(source, path)
+        try:
+            same = source.exists() and path.exists() and os.path.samefile(source, path)
+        except OSError:
+            same = False
         if same or path.resolve() == source.resolve():
-            raise ConfigurationError(field, str(path), f"a path other than the input {str(given)!r}")
+            raise OutputFileError(field, str(path), f"a path other than the input {str(given)!r}")
+    if existing is not None and os.path.lexists(path):
+        raise OutputFileError(field, str(path), f"{existing} (this file exists)")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise ConfigurationError(field, str(path), f"a path whose folder can be created ({e.strerror or e})") from e
+        raise OutputFileError(field, str(path), f"a path whose folder can be created ({e.strerror or e})") from e
     if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise ConfigurationError(field, str(path), "a writable path")
+        raise OutputFileError(field, str(path), "a writable path")
     return path

@@ -33,6 +33,7 @@ import numpy as np
 
 from psm_control.effort_model import shared_regressor
 from psm_control.errors import UnknownVariantError
+from psm_control.outputs import write_atomic
 
 __all__ = ["ARM_FILES", "IdentifiedArm", "identified_arm"]
 
@@ -131,9 +132,9 @@ class IdentifiedArm:
             provenance=str(data["provenance"]),
         )
 
-    def write(self, path: Path) -> None:
-        """Write the arm as JSON."""
-        path.write_text(json.dumps(self.to_json(), indent=2) + "\n", encoding="utf-8")
+    def write(self, path: Path, field: str = "--write-arm") -> None:
+        """Write the arm as JSON, whole or not at all (:func:`psm_control.outputs.write_atomic`)."""
+        write_atomic(path, json.dumps(self.to_json(), indent=2) + "\n", field)
 
 
 @functools.cache

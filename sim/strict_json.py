@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
+
+from psm_control.outputs import write_atomic
 
 __all__ = ["strict_dumps", "to_strict", "write_strict_json"]
 
@@ -37,15 +37,12 @@ def strict_dumps(value: Any, **kwargs: Any) -> str:
     return json.dumps(to_strict(value), allow_nan=False, **kwargs)
 
 
-def write_strict_json(path: Path, value: Any, indent: int | None = 2, sort_keys: bool = False) -> None:
-    """Write ``value`` as strict JSON atomically: a crash leaves the old file or none, never half a file."""
-    path = Path(path)
-    text = strict_dumps(value, indent=indent, sort_keys=sort_keys) + "\n"
-    fd, temporary = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(text)
-        os.replace(temporary, path)
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
+def write_strict_json(
+    path: Path, value: Any, indent: int | None = 2, sort_keys: bool = False, field: str = "output"
+) -> None:
+    """Write ``value`` as strict JSON atomically: a crash leaves the old file or none, never half a file.
+
+    Written by :func:`psm_control.outputs.write_atomic`: a device or FIFO at ``path`` is never replaced, and
+    a full disk is an :class:`~psm_control.errors.OutputWriteError` naming ``field`` and the path.
+    """
+    write_atomic(path, strict_dumps(value, indent=indent, sort_keys=sort_keys) + "\n", field)

@@ -23,6 +23,7 @@ from typing import Any
 import yaml
 
 from psm_control.errors import ConfigurationError
+from psm_control.outputs import write_atomic
 from safety.config import SafetyConfig
 from sim.sweep.space import ParameterRange, Trial
 from sim.sweep.stats import wilson_interval
@@ -213,5 +214,5 @@ def write_config(
     changed = {k: list(v) if isinstance(v, tuple) else v for k, v in config.to_dict().items() if v != defaults[k]}
     path.parent.mkdir(parents=True, exist_ok=True)
     header = "".join(f"# {line}\n" for line in note.splitlines())
-    path.write_text(header + yaml.safe_dump(changed, sort_keys=True))
+    write_atomic(path, header + yaml.safe_dump(changed, sort_keys=True), "--out")
     return config

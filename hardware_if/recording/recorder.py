@@ -52,6 +52,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
 from hardware_if.recording.checked_file import CheckedFile, RecordingError, describe_os_error
+from psm_control.outputs import special_file_kind
 from sim.scene_stream import LOG_TOPIC, SceneSink, log_message
 
 __all__ = ["CHANNELS", "CHUNK_SIZE_BYTES", "FLUSH_PERIOD_S", "Recorder", "RecordingRead", "read_recording"]
@@ -119,6 +120,9 @@ class Recorder:
         self.mirror = mirror
         self._interventions: tuple[str, ...] = ()
         self._failed: RecordingError | None = None
+        kind = special_file_kind(self.path)
+        if kind is not None:  # opening a FIFO would block, a device would take the run
+            raise RecordingError(self.path, f"not a regular file (this is a {kind})")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = CheckedFile(self.path)

@@ -22,6 +22,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from hardware_if.recording.replay import Recording, answers
+from psm_control.outputs import atomic_path
 from psm_control.robot import PsmModel
 
 __all__ = ["LAYOUT_KEY", "EpisodeSpan", "draw_recording", "episode_spans", "figure_layout", "plot_recording"]
@@ -114,7 +115,8 @@ def plot_recording(rec: Recording, out: str | Path) -> Path:
     path = Path(out)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure = draw_recording(rec)
-    figure.savefig(path, metadata={"Title": figure.get_suptitle(), LAYOUT_KEY: figure_layout(figure)})
+    with atomic_path(path, "--plot") as temporary:
+        figure.savefig(temporary, metadata={"Title": figure.get_suptitle(), LAYOUT_KEY: figure_layout(figure)})
     return path
 
 

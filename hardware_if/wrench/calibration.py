@@ -20,6 +20,7 @@ import numpy as np
 from psm_control.effort_model import shared_regressor
 from psm_control.errors import ConfigurationError, InputFileError
 from psm_control.inputs import check_regular_file
+from psm_control.outputs import write_atomic
 from psm_control.robot import PsmConfiguration
 from safety.config import SafetyConfig
 from sim.force_sensing import console_force
@@ -96,9 +97,9 @@ class WrenchCalibration:
         residual = np.asarray(efforts, dtype=float) - self.model_efforts(configuration.q, qd, qdd)
         return console_force(configuration.base_jacobian(), residual)
 
-    def write(self, path: Path) -> None:
-        """Write the calibration as JSON."""
-        path.write_text(json.dumps({"kind": "wrench_calibration", **asdict(self)}, indent=2) + "\n")
+    def write(self, path: Path, field: str = "--out") -> None:
+        """Write the calibration as JSON, whole or not at all (:func:`psm_control.outputs.write_atomic`)."""
+        write_atomic(path, json.dumps({"kind": "wrench_calibration", **asdict(self)}, indent=2) + "\n", field)
 
 
 _FIGURES = (

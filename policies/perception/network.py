@@ -28,6 +28,7 @@ from policies.errors import CheckpointError
 from policies.perception.frames import stereo_input
 from psm_control.errors import InputFileError
 from psm_control.inputs import check_regular_file
+from psm_control.outputs import atomic_path
 from sim.endoscope import Endoscope, StereoFrame
 
 __all__ = ["SHIPPED_MODEL", "SHIPPED_MODELS", "SiteEstimator", "SiteNet", "load_estimator"]
@@ -141,7 +142,8 @@ class SiteEstimator:
             "info": self.info,
         }
         tensors = {k: v.detach().contiguous() for k, v in self.net.state_dict().items()}
-        save_file(tensors, str(path), metadata={"site_estimator": json.dumps(meta)})
+        with atomic_path(path, "--out") as temporary:
+            save_file(tensors, str(temporary), metadata={"site_estimator": json.dumps(meta)})
         return path
 
 

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from psm_control.errors import TissueRetractError
+from psm_control.outputs import write_atomic
 from sim.strict_json import strict_dumps
 
 __all__ = ["IDENTITY_FILE", "SweepIdentityError", "file_digest", "prepare_output"]
@@ -85,6 +85,4 @@ def prepare_output(out: Path, identity: Mapping[str, Any], *, fresh: bool = Fals
         return
     elif episodes.is_file() and episodes.stat().st_size > 0:
         raise SweepIdentityError(out, [(IDENTITY_FILE, None, "a recorded sweep")])
-    temporary = record.with_suffix(".json.tmp")
-    temporary.write_text(strict_dumps(wanted, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    os.replace(temporary, record)
+    write_atomic(record, strict_dumps(wanted, indent=2, sort_keys=True) + "\n", "--out")

@@ -15,6 +15,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from psm_control.outputs import write_atomic
+
 __all__ = ["Page", "percent", "percent_interval", "quantity", "unit_of"]
 
 _STYLE = """
@@ -134,8 +136,8 @@ class Page:
     def write(self, out_dir: Path, stem: str = "report") -> dict[str, Path]:
         """Write ``<stem>.html`` and ``<stem>.md`` into ``out_dir``; returns their paths."""
         paths = {"report_html": out_dir / f"{stem}.html", "report_md": out_dir / f"{stem}.md"}
-        paths["report_html"].write_text(self.html(), encoding="utf-8")
-        paths["report_md"].write_text(self.markdown(), encoding="utf-8")
+        write_atomic(paths["report_html"], self.html(), "--out")
+        write_atomic(paths["report_md"], self.markdown(), "--out")
         return paths
 
 

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FormatStrFormatter, FuncFormatter
 
 from psm_control import __version__
+from psm_control.outputs import atomic_path
 from sim.evaluation import FAILURE_CLASSES, describe_exceedances, force_limit_summary
 from sim.stiffness_fifths import StiffnessFifth, by_stiffness_fifth, expert_summary
 from sim.sweep.page import Page, percent, percent_interval, quantity
@@ -69,7 +70,8 @@ def _plot_success(records: Sequence[dict[str, Any]], parameter: ParameterRange, 
     axis.set_ylabel("success [%] (95 % CI)")
     axis.grid(alpha=0.3)
     figure.tight_layout()
-    figure.savefig(path)
+    with atomic_path(path, "--out") as temporary:
+        figure.savefig(temporary)
 
 
 def _plot_force_against(
@@ -96,7 +98,8 @@ def _plot_force_against(
     axis.legend(fontsize=8)
     axis.grid(alpha=0.3)
     figure.tight_layout()
-    figure.savefig(path)
+    with atomic_path(path, "--out") as temporary:
+        figure.savefig(temporary)
 
 
 def _plot_forces(records: Sequence[dict[str, Any]], path: Path, force_limit_n: float | None) -> None:
@@ -111,7 +114,8 @@ def _plot_forces(records: Sequence[dict[str, Any]], path: Path, force_limit_n: f
     axis.set_ylabel("episodes")
     axis.grid(alpha=0.3)
     figure.tight_layout()
-    figure.savefig(path)
+    with atomic_path(path, "--out") as temporary:
+        figure.savefig(temporary)
 
 
 def _plain_log_axis(axis: Any) -> None:

@@ -12,6 +12,7 @@ import numpy as np
 from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
+from psm_control.outputs import atomic_path
 from sim.envs import gym_id, make
 from sim.expert import ScriptedExpert
 from tissue_retract.cli._camera import tissue_params
@@ -24,11 +25,13 @@ def run_episodes(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise ConfigurationError("--episodes", args.episodes, "a positive number of episodes")
     if args.out:
-        check_output_path(args.out, "--out")
+        # numpy adds .npz to a name without it: the file checked is the file written.
+        args.out = args.out if args.out.endswith(".npz") else f"{args.out}.npz"
+        check_output_path(args.out, "--out", (args.texture,))
     if args.video:
         if not args.video.endswith((".gif", ".mp4")):
             raise ConfigurationError("--video", args.video, "a .gif or .mp4 file")
-        check_output_path(args.video, "--video", (args.out,))
+        check_output_path(args.video, "--video", (args.out, args.texture))
     env = make(args.task, tissue=tissue_params(args.texture))
     expert = ScriptedExpert(env)
     kept: list[dict[str, Any]] = []
@@ -55,7 +58,8 @@ def run_episodes(args: argparse.Namespace) -> int:
         print(f"wrote {len(kept)} demonstrations to {args.out}")
     if args.video:
         timing: dict[str, Any] = {"duration": 50} if args.video.endswith(".gif") else {"fps": 20}
-        imageio.mimsave(args.video, frames, **timing)
+        with atomic_path(args.video, "--video") as temporary:
+            imageio.mimsave(temporary, frames, **timing)
         print(f"wrote {len(frames)} frames to {args.video}")
     return 0
 
@@ -109,6 +113,10 @@ def _save(path: str, episodes: list[dict[str, Any]], env_id: str, task: str, ver
         key: np.stack([e[key] for e in episodes]) if episodes else np.zeros((0,))
         for key in ("observation", "achieved_goal", "desired_goal", "action", "reward")
     }
-    np.savez_compressed(
-        path, **arrays, seed=np.array([e["seed"] for e in episodes], dtype=np.int64), metadata=json.dumps(metadata)
-    )
+    with atomic_path(path, "--out") as temporary:
+        np.savez_compressed(
+            temporary,
+            **arrays,
+            seed=np.array([e["seed"] for e in episodes], dtype=np.int64),
+            metadata=json.dumps(metadata),
+        )

@@ -187,5 +187,5 @@ def run(args: argparse.Namespace) -> int:
             f"ticks above {KKT_TOLERANCE:g} (target: none); {solve.solver} ticks went to {solve.solver_name}"
         )
     if args.json:
-        write_strict_json(Path(args.json), result)
+        write_strict_json(Path(args.json), result, field="--json")
     return 0

@@ -84,5 +84,5 @@ def run(args: argparse.Namespace) -> int:
         f"cpus allowed {results['cpus_allowed']}, load {results['load_average_1min']:.2f}"
     )
     if args.json:
-        write_strict_json(Path(args.json), results)
+        write_strict_json(Path(args.json), results, field="--json")
     return 0

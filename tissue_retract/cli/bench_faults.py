@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from psm_control.outputs import write_atomic
 from sim.strict_json import write_strict_json
 from tissue_retract.cli._ros import add_bench_domain_argument, bench_domain_id
 
@@ -49,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         hold = result.hold.removeprefix("HOLD: ") or "-"
         ok = "yes" if result.ok else "NO"
         print(f"{fault.name:<{width}}  {result.status:>4}  {ok:<3}  {hold} | {result.recording}", flush=True)
-        (root / f"{index:02d}" / "output.txt").write_text(result.output)
+        write_atomic(root / f"{index:02d}" / "output.txt", result.output, "--keep")
         rows.append(
             {
                 "fault": fault.name,
@@ -68,5 +69,5 @@ def run(args: argparse.Namespace) -> int:
     passed = sum(r["ok"] for r in rows)
     print(f"{passed}/{len(rows)} faults ended as expected; files in {root}")
     if args.json:
-        write_strict_json(Path(args.json), {"faults": rows})
+        write_strict_json(Path(args.json), {"faults": rows}, field="--json")
     return 0 if passed == len(rows) else 1

@@ -147,5 +147,5 @@ def run(args: argparse.Namespace) -> int:
         "results": results,
     }
     if args.json:
-        write_strict_json(Path(args.json), report)
+        write_strict_json(Path(args.json), report, field="--json")
     return 0

@@ -184,5 +184,5 @@ def run(args: argparse.Namespace) -> int:
             "worst_force_over_travel_bound": None if travel is None else travel["force_over_travel_bound"],
             "episodes": rows,
         }
-        write_strict_json(Path(args.json), document, indent=1)
+        write_strict_json(Path(args.json), document, indent=1, field="--json")
     return 0 if held else 1

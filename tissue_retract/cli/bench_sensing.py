@@ -280,6 +280,6 @@ def run(args: argparse.Namespace) -> int:
             _print(f"{path}: calibrated by {args.calibration}", entry["calibrated"])
         results["logs"][path] = entry
     if args.json:
-        write_strict_json(args.json, results)
+        write_strict_json(args.json, results, field="--json")
         print(f"written to {args.json}")
     return 0

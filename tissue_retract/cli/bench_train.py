@@ -111,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         for s in summary.values():  # JSON has no infinity
             s["median_s"] = None if math.isinf(s["median_s"]) else s["median_s"]
         target = {"below_expert": args.below_expert} if args.robust else args.target
-        write_strict_json(Path(args.json), {"runs": rows, "summary": summary, "target": target, "robust": args.robust})
+        document = {"runs": rows, "summary": summary, "target": target, "robust": args.robust}
+        write_strict_json(Path(args.json), document, field="--json")
     return 0
 
 

@@ -36,13 +36,14 @@ import numpy as np
 from psm_control.commands import CartesianDelta
 from psm_control.errors import ConfigurationError, TissueRetractError
 from psm_control.inputs import check_output_path
+from psm_control.outputs import write_atomic
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
 from sim.envs.base import EnvConfig
 from sim.force_sensing import error_bound_n, sensing_params
 from sim.sweep.stopping import handling
-from tissue_retract.cli._checks import float_in, output_file
+from tissue_retract.cli._checks import float_in
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
 __all__ = ["add_arguments", "run"]
@@ -99,7 +100,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--record",
         metavar="BAG",
-        type=output_file("--record"),
         default=None,
         help="live: also keep both excitations as a rosbag2 bag (MCAP) of /ARM/measured_js, for --from",
     )
@@ -210,18 +210,18 @@ def _offline(args: argparse.Namespace) -> int:
         return [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in paths]
 
     if args.check is not None:
-        calibration = read_calibration(args.check, exact_console=True)  # checked on logs, not a console
         if args.json:
-            check_output_path(args.json, "--json")
+            check_output_path(args.json, "--json", (args.check, *args.logs))
+        calibration = read_calibration(args.check, exact_console=True)  # checked on logs, not a console
         summary = check_calibration(calibration, prepared(args.logs)).summary()
         print(_table(summary))
         if args.json:
-            Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
+            write_atomic(args.json, json.dumps(summary, indent=2) + "\n", "--json")
             print(f"written to {args.json}")
         return 0
     if args.out is None:
         raise ConfigurationError("--out", None, "a file to write the calibration to (or --check F.json)")
-    output = check_output_path(args.out, "--out")
+    output = check_output_path(args.out, "--out", (*args.logs, *(args.held_out or ())))
     logs = [read_joint_log(path, arm=args.arm, rate_hz=args.rate) for path in args.logs]
     if args.held_out:
         fit, held_out = [prepare_log(log) for log in logs], prepared(args.held_out)
@@ -274,14 +274,21 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None:
         print("tissue-retract calibrate-wrench: error: --out F.json is required", file=sys.stderr)
         return 1
-    output = check_output_path(args.out, "--out")
-    if args.record is not None and args.record.exists():
-        print(
-            f"tissue-retract calibrate-wrench: error: --record={str(args.record)!r} is not allowed: expected a bag "
-            "folder that does not exist yet (ros2 bag record's -o)",
-            file=sys.stderr,
-        )
-        return 1
+    output = check_output_path(args.out, "--out", (args.record,))
+    space = None
+    if args.record is not None:  # before the arm moves: the bag's folder, and room for both excitations
+        from hardware_if.wrench.bag_writer import reserve_bag_space
+
+        space = reserve_bag_space(args.record, 2 * math.ceil(args.duration * 100.0))
+    try:
+        return _live(args, output, space)
+    finally:
+        if space is not None:
+            space.discard()
+
+
+def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
+    """Drive both excitations, keep them (``--record``), fit, write the calibration; 0, or 1 with the reason."""
     apply_console_arguments(args)
     # The ros extra, imported after the environment it reads is set.
     from hardware_if.client.psm_client import PsmClient
@@ -341,9 +348,14 @@ def run(args: argparse.Namespace) -> int:
                 except (DvrkError, RuntimeError) as e:
                     print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
                     return 1
+            record_error = None
             if args.record is not None:  # kept before the fit, which may refuse to write a calibration
-                write_joint_bag(args.record, args.arm, [fit, held_out], start_s=time.time())
-                print(f"excitation recorded to {args.record} (/{args.arm}/measured_js, both trajectories)")
+                try:
+                    write_joint_bag(args.record, args.arm, [fit, held_out], start_s=time.time(), space=space)
+                    print(f"excitation recorded to {args.record} (/{args.arm}/measured_js, both trajectories)")
+                except TissueRetractError as e:  # the fit still runs: the calibration keeps what the arm did
+                    record_error = e
+                    print(f"tissue-retract calibrate-wrench: error: {e}; fitting all the same", file=sys.stderr)
             stage = "the fit"
             calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
     except Interrupted as e:
@@ -382,4 +394,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     calibration.write(Path(output))
     print(f"written to {output} (fitted on {calibration.origin})")
+    if record_error is not None:
+        print(f"tissue-retract calibrate-wrench: error: {record_error}", file=sys.stderr)
+        return 1
     return 0

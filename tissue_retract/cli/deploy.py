@@ -33,7 +33,8 @@ a subscribed topic, an arm not ENABLED, homed and idle when an episode starts (w
 last verified command), records the fault, prints ``HOLD: <reason>`` and exits with status 4.
 Ctrl-C (SIGINT), SIGTERM and SIGHUP stop between two control ticks and close the recording; the exit
 status is 128 + the signal: 130, 143, 129.
-Every run is recorded to MCAP (``--record``, default ``runs/deploy-<time>.mcap``; see ``replay``), with its
+Every run is recorded to MCAP (``--record``, default ``runs/deploy-<time>.mcap``; see ``replay``; an existing
+recording is kept: the run is refused unless ``--force`` replaces it), with its
 3-D scene in Foxglove's schemas: the measured arm, the commanded arm (translucent blue; in a dry run, where
 it would be sent), the tissue, site, goal and force, and holds as log messages; ``--live [PORT]`` serves the
 same scene on ws://127.0.0.1:PORT while it runs (layout: ``docs/foxglove/tissue-retract-layout.json``).
@@ -98,6 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dry-run", action="store_true", help="compute and record, publish nothing on motion topics")
     parser.add_argument("--safety-config", metavar="FILE", default=None, help="control chain settings (.toml/.yaml)")
     parser.add_argument("--record", metavar="FILE.mcap", default=None, help="MCAP recording (default: runs/...)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --record file")
     add_force_sensing_argument(
         parser,
         note=". --target sim only: with --target dvrk the filter senses what the console measures (dvrk, or "
@@ -174,6 +176,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _default_record() -> Path:
+    """``runs/deploy-<time>.mcap``, with ``-2``, ``-3`` ... when a run in the same second has it."""
+    stem = Path("runs") / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}"
+    path, index = stem.with_suffix(".mcap"), 1
+    while path.exists():
+        index += 1
+        path = stem.with_name(f"{stem.name}-{index}.mcap")
+    return path
+
+
 def run(args: argparse.Namespace) -> int:
     """Deploy, print the report, return 0, 4 (hold) or 128 + the stop signal (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP)."""
     if args.network and args.dry_run:
@@ -202,8 +214,14 @@ def run(args: argparse.Namespace) -> int:
     safety_config = None
     if args.safety_config is not None:
         safety_config = load_safety_config(args.safety_config)
-    record = Path(args.record) if args.record else Path("runs") / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
-    check_output_path(record, "--record", (args.policy, args.safety_config))
+    record = Path(args.record) if args.record else _default_record()
+    inputs = (args.policy, args.safety_config, args.wrench_calibration, args.registration, args.texture)
+    check_output_path(
+        record,
+        "--record",
+        inputs,
+        existing=None if args.force else "a new file: an earlier recording is kept unless --force replaces it",
+    )
     site = args.site
     if args.registration is not None:
         site = read_registration(args.registration, args.arm)

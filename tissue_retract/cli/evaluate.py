@@ -193,6 +193,7 @@ def run(args: argparse.Namespace) -> int:
             write_strict_json(
                 output,
                 {"policy_error": str(failure), "episodes": [r.to_dict() for r in results]},
+                field="--json",
             )
         kept = f"; the {len(results)} episodes before it are in {output}" if output is not None else ""
         print(f"tissue-retract evaluate: error: policy error: {failure}{kept}", file=sys.stderr)
@@ -259,7 +260,7 @@ def run(args: argparse.Namespace) -> int:
     add_row("env steps/s", f"{summary['env_steps_per_s']:.0f}")
     console.print(table)
     if output is not None:
-        write_strict_json(output, {"summary": summary, "episodes": [r.to_dict() for r in results]})
+        write_strict_json(output, {"summary": summary, "episodes": [r.to_dict() for r in results]}, field="--json")
     if interrupted:
         kept = f"; the {len(results)} finished episodes are in {output}" if output is not None else ""
         print(f"tissue-retract evaluate: interrupted{kept}", file=sys.stderr)

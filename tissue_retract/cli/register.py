@@ -68,6 +68,6 @@ def run(args: argparse.Namespace) -> int:
     print(registration.line())
     print(f"  frame {args.arm}_base [m], {registration.samples} samples within {registration.spread_m * 1000:.3f} mm")
     if output is not None:
-        write_strict_json(output, registration.to_dict())
+        write_strict_json(output, registration.to_dict(), field="--out")
         print(f"  written to {output}")
     return 0

@@ -127,6 +127,6 @@ def run(args: argparse.Namespace) -> int:
         }
         if lifts:
             document["lift"] = {model: [list(point) for point in curve] for model, curve in lifts.items()}
-        write_strict_json(output, document)
+        write_strict_json(output, document, field="--json")
         print(f"written to {output}")
     return 0

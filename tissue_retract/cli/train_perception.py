@@ -36,6 +36,7 @@ import numpy as np
 
 import sim.envs
 from psm_control.errors import ConfigurationError
+from psm_control.outputs import write_atomic
 from sim.robustness import TrainingRanges, parse_vary, training_ranges
 from sim.sweep.stopping import handling
 from tissue_retract.cli._camera import check_texture
@@ -129,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     estimator.save(out / _MODEL)
     elapsed = time.monotonic() - started
     estimator.info["elapsed_s"] = elapsed
-    (out / "report.json").write_text(json.dumps({**estimator.info, "elapsed_s": elapsed}, indent=2))
+    write_atomic(out / "report.json", json.dumps({**estimator.info, "elapsed_s": elapsed}, indent=2), "--out")
     print(f"trained {report.epochs} epoch(s) on {report.train_frames} frames in {report.train_s:.1f} s")
     print(
         f"held-out site error ({report.heldout_frames} frames x 3 sites): "

@@ -20,6 +20,7 @@ from rich.table import Table
 
 from psm_control import __version__
 from psm_control.errors import ConfigurationError
+from psm_control.outputs import atomic_path
 from safety.config import MAX_FORCE_LIMIT_N, SafetyConfig
 from sim.envs import gym_id
 from sim.force_sensing import error_bound_n, sensing_params
@@ -115,7 +116,8 @@ def _plot(
     axis.grid(alpha=0.3)
     axis.legend(fontsize=8)
     figure.tight_layout()
-    figure.savefig(path)
+    with atomic_path(path, "--out") as temporary:
+        figure.savefig(temporary)
 
 
 def _limits_below_sensing(limits_n: list[float], sensing: str, sensing_error_n: float | None) -> str:
