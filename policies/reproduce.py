@@ -40,7 +40,7 @@ from sim.strict_json import write_strict_json
 from sim.sweep import BACKENDS
 from sim.sweep.cluster import ray_cluster
 from sim.sweep.page import Page, percent
-from sim.sweep.stopping import stop_pool
+from sim.sweep.stopping import pool_worker_start, stop_pool
 
 __all__ = [
     "CODE_DIRS",
@@ -329,7 +329,9 @@ def run_all(
         for run in runs:
             collect(run, functools.partial(_execute, run))
     else:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with ProcessPoolExecutor(
+            max_workers=jobs, mp_context=multiprocessing.get_context("spawn"), initializer=pool_worker_start
+        ) as pool:
             futures = {pool.submit(_execute, run): run for run in runs}
             try:
                 for future in as_completed(futures):

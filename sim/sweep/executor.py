@@ -9,10 +9,8 @@ worker process serves many trials. Results are stored the moment they arrive.
 from __future__ import annotations
 
 import importlib
-import multiprocessing
 import os
 import sys
-import threading
 import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -26,7 +24,7 @@ from psm_control.errors import ConfigurationError, UnknownVariantError
 from sim.sweep.cluster import ray_cluster
 from sim.sweep.memory import WorkerMemory, resident_mb
 from sim.sweep.space import Trial
-from sim.sweep.stopping import STOP_GRACE_S, ignore_stop_signals, stop_pool
+from sim.sweep.stopping import STOP_GRACE_S, pool_worker_start, stop_pool
 from sim.sweep.store import EpisodeStore
 
 __all__ = ["BACKENDS", "call_worker", "cap_jobs", "run_trials"]
@@ -54,26 +52,6 @@ def call_worker(worker: str, trial: dict[str, Any], kwargs: dict[str, Any]) -> d
     except BaseException as e:
         return {**trial, "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=5)}
     return {**trial, **outcome, "worker_pid": os.getpid(), "worker_rss_mb": resident_mb()}
-
-
-def _end_with_parent() -> None:
-    """Pool initializer: end this worker as soon as the sweep's process is gone (even after a SIGKILL).
-
-    The worker ignores SIGINT and SIGTERM (:mod:`sim.sweep.stopping`): its trial finishes and is kept.
-
-    A spawned process holds a sentinel that becomes ready when its parent dies; a daemon thread waits on
-    it, so no orphaned worker (and, with them gone, no orphaned resource tracker) keeps running.
-    """
-    ignore_stop_signals()  # the sweep's process stops the pool, after the running trials
-    parent = multiprocessing.parent_process()
-    if parent is None:
-        return
-
-    def watch() -> None:
-        parent.join()
-        os._exit(1)
-
-    threading.Thread(target=watch, name="end-with-parent", daemon=True).start()
 
 
 def cap_jobs(jobs: int | None) -> int:
@@ -112,7 +90,7 @@ def _run_local(
         # A pool breaks as a whole when one of its processes dies; the trials it was running are
         # charged one attempt each and the pool is rebuilt for whatever is left.
         with ProcessPoolExecutor(
-            max_workers=min(jobs, len(queue)), mp_context=get_context("spawn"), initializer=_end_with_parent
+            max_workers=min(jobs, len(queue)), mp_context=get_context("spawn"), initializer=pool_worker_start
         ) as pool:
             running: dict[Future[dict[str, Any]], Trial] = {}
             broken = False

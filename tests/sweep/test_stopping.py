@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -76,3 +77,30 @@ def test_worker_memory_reports_growth_after_warm_up() -> None:
         assert record == {"index": i}
     assert memory.growth_mb() == pytest.approx(5.0)
     assert "100.0 -> 105.0 MB over 30 episodes" in memory.line() and "+5.0 MB" in memory.line()
+
+
+def test_a_bound_child_ends_when_its_parent_is_killed() -> None:
+    """A child started through ChildProcesses ends when its command is killed with SIGKILL (no handler runs)."""
+    parent_code = (
+        "import subprocess, sys\n"
+        "from sim.sweep.stopping import ChildProcesses\n"
+        "with ChildProcesses('test') as children:\n"
+        "    child = children.start('cat', ['cat'], stdin=subprocess.PIPE)\n"
+        "    print(child.pid, flush=True)\n"
+        "    sys.stdin.read()\n"
+    )
+    parent = subprocess.Popen(
+        [sys.executable, "-c", parent_code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert parent.stdout is not None
+        child = int(parent.stdout.readline())
+        watch = os.pidfd_open(child)  # becomes readable when the child ends
+        parent.kill()
+        parent.wait()
+        ended, _, _ = select.select([watch], [], [], 60.0)  # a failure guard, not a wait for a time
+        os.close(watch)
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+    assert ended, f"child {child} outlived its killed parent"

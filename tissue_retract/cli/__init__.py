@@ -48,10 +48,10 @@ SUBCOMMANDS: dict[str, str] = {
 }
 
 
-#: Commands that run for long and stop on SIGINT or SIGTERM with handlers of their own, whatever the
-#: disposition or signal mask they inherited (exit 130 or 143; what finished is kept, see
-#: :mod:`sim.sweep.stopping`).
-STOPPABLE_COMMANDS = ("evaluate", "robustness", "tune-safety", "reproduce", "train")
+#: Commands that run for long and stop on SIGINT, SIGTERM or SIGHUP with handlers of their own, whatever the
+#: disposition or signal mask they inherited (exit 130, 143 or 129; what finished is kept, the child
+#: processes they started are stopped first, see :mod:`sim.sweep.stopping`).
+STOPPABLE_COMMANDS = ("evaluate", "robustness", "tune-safety", "reproduce", "train", "bench")
 
 
 def _exit_now(status: int) -> None:
@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt as e:
         print(f"tissue-retract {args.command}: interrupted", file=sys.stderr)
-        status = 128 + int(getattr(e, "signum", signal.SIGINT))  # 130 for Ctrl-C, 143 for SIGTERM
+        status = 128 + int(getattr(e, "signum", signal.SIGINT))  # 130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP
         if args.command in STOPPABLE_COMMANDS:
             _exit_now(status)
         return status

@@ -22,6 +22,11 @@ force is the largest of ``sim-dvrk --truth`` over the episode's scene. Beside th
 interval it prints the goal distance of each episode, the peak true force, the policy's step period and the
 age of the newest ``measured_js`` at each control tick (p50/p99, from the deploy's recording) and the holds.
 It exits 1 when a row's ROS success falls below the in-process 95 % interval.
+
+SIGINT, SIGTERM or SIGHUP (even when it inherited SIGINT ignored, as a script's ``&`` job does) stops the
+running deploy, then its console, removes the bench's temporary folder, says so in one line and exits with
+128 + the signal (130, 143, 129); the consoles and deploys end with the bench even when it is killed
+(:class:`sim.sweep.stopping.ChildProcesses`), so none is left serving the domain.
 """
 
 from __future__ import annotations
@@ -30,11 +35,10 @@ import argparse
 import json
 import os
 import signal
-import subprocess
 import sys
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
+from subprocess import PIPE
 from typing import Any
 
 import gymnasium as gym
@@ -42,6 +46,7 @@ import numpy as np
 
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success, wilson_interval
+from sim.sweep.stopping import ChildProcesses
 from tissue_retract.cli._checks import float_in, int_in
 from tissue_retract.cli._ros import add_bench_domain_argument, bench_domain_id
 
@@ -140,12 +145,13 @@ def _in_process(task: str, mode: str, seeds: Sequence[int]) -> list[dict[str, An
 class _Console:
     """A ``sim-dvrk`` child process on the run's domain, writing its ground truth to a file."""
 
-    def __init__(self, task: str, seed: int, folder: Path, extra: Sequence[str] = ()) -> None:
-        self.truth = folder / f"truth-{seed}.jsonl"
-        self.log = (folder / f"sim-dvrk-{seed}.log").open("w")
+    def __init__(self, children: ChildProcesses, task: str, seed: int, extra: Sequence[str] = ()) -> None:
+        self.children = children
+        self.truth = children.folder / f"truth-{seed}.jsonl"
+        self.log = (children.folder / f"sim-dvrk-{seed}.log").open("w")
         command = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--task", task, "--seed", str(seed)]
         command += ["--domain-id", os.environ["ROS_DOMAIN_ID"], "--truth", str(self.truth), *extra]
-        self.process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=self.log, text=True)
+        self.process = children.start("sim-dvrk", command, stdout=PIPE, stderr=self.log, text=True)
 
     def printed(self, name: str) -> list[str]:
         """The numbers of the start-up line ``<name>: X Y Z`` (waits for it; sim-dvrk prints it before serving)."""
@@ -164,20 +170,16 @@ class _Console:
 
     def stop(self) -> list[dict[str, Any]]:
         """Stop it (Ctrl-C) and return its ground truth, a line per policy period."""
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-        try:
-            self.process.communicate(timeout=30.0)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.communicate()
+        self.children.stop(self.process, signal.SIGINT)
         self.log.close()
         if not self.truth.is_file():
             return []
         return [json.loads(line) for line in self.truth.read_text().splitlines() if line.strip()]
 
 
-def _deploy(task: str, seed: int, episodes: int, record: Path, args: argparse.Namespace, *extra: str) -> str:
+def _deploy(
+    children: ChildProcesses, task: str, seed: int, episodes: int, record: Path, args: argparse.Namespace, *extra: str
+) -> str:
     """Run ``deploy --target dvrk`` of the shipped policy to its end; what it printed."""
     command = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", "pretrained", "--target", "dvrk"]
     command += ["--task", task, "--episodes", str(episodes), "--seed", str(seed), "--record", str(record)]
@@ -186,9 +188,7 @@ def _deploy(task: str, seed: int, episodes: int, record: Path, args: argparse.Na
         command += ["--safety-config", args.safety_config]
     if args.policy_budget is not None:
         command += ["--policy-budget", str(args.policy_budget)]
-    done = subprocess.run(
-        command, capture_output=True, text=True, timeout=60.0 + _DEPLOY_S_PER_EPISODE * episodes, check=False
-    )
+    done = children.run("deploy", command, timeout_s=60.0 + _DEPLOY_S_PER_EPISODE * episodes)
     return done.stdout + done.stderr
 
 
@@ -248,10 +248,17 @@ def _timing(record: Path) -> dict[str, list[Any]]:
     return {"step_period_s": steps, "measured_age_s": ages, "holds": holds}
 
 
-def _ros(task: str, mode: str, seeds: Sequence[int], folder: Path, args: argparse.Namespace) -> dict[str, Any]:
-    """The shipped policy deployed through ROS against sim-dvrk on ``seeds``, scored on the console's truth."""
+def _ros(
+    task: str, mode: str, seeds: Sequence[int], children: ChildProcesses, args: argparse.Namespace
+) -> dict[str, Any]:
+    """The shipped policy deployed through ROS against sim-dvrk on ``seeds``, scored on the console's truth.
+
+    A stop signal or an error leaves the console and the deploy running to ``children``, which stops the
+    deploy before its console.
+    """
     import sim.envs
 
+    folder = children.folder
     threshold_m = sim.envs.make(task).unwrapped.config.success_threshold_m
     timing: dict[str, list[Any]] = {"step_period_s": [], "measured_age_s": [], "holds": []}
     episodes: list[dict[str, Any]] = []
@@ -263,12 +270,10 @@ def _ros(task: str, mode: str, seeds: Sequence[int], folder: Path, args: argpars
             timing[key].extend(values)
 
     if mode == "topics":
-        console = _Console(task, seeds[0], folder)
+        console = _Console(children, task, seeds[0])
         record = folder / f"{task}-{mode}.mcap"
-        try:
-            output = _deploy(task, seeds[0], len(seeds), record, args, "--task-topics")
-        finally:
-            truth = console.stop()
+        output = _deploy(children, task, seeds[0], len(seeds), record, args, "--task-topics")
+        truth = console.stop()
         deployed(record, output)
         ends = _episode_ends(record)  # the task topics at each episode's end: the console's truth then
         for episode in _episodes_from_truth(truth, seeds, threshold_m):
@@ -281,19 +286,19 @@ def _ros(task: str, mode: str, seeds: Sequence[int], folder: Path, args: argpars
         for seed in seeds:
             # A camera sees the site but not the grasp: the jaw tells it, as a real one stalled on tissue (--blind).
             extra = ["--blind"] if mode == "blind" else ["--blind", "--endoscope"]
-            console = _Console(task, seed, folder, extra)
+            console = _Console(children, task, seed, extra)
             record = folder / f"{task}-{mode}-{seed}.mcap"
-            try:
-                # The goal is the scene's, given as the in-process episode is given it (PerceivedTask and
-                # RegisteredTask take the episode's goal); only the site is registered or seen.
-                site, goal = console.printed("site"), console.printed("goal")
-                if mode == "blind":
-                    output = _deploy(task, seed, 1, record, args, "--site", *site, "--goal", *goal)
-                else:
-                    named = ("--camera-site", console.camera_site())  # MultiSite grasps another site each episode
-                    output = _deploy(task, seed, 1, record, args, "--perception", "camera", "--goal", *goal, *named)
-            finally:
-                truth = console.stop()
+            # The goal is the scene's, given as the in-process episode is given it (PerceivedTask and
+            # RegisteredTask take the episode's goal); only the site is registered or seen.
+            site, goal = console.printed("site"), console.printed("goal")
+            if mode == "blind":
+                output = _deploy(children, task, seed, 1, record, args, "--site", *site, "--goal", *goal)
+            else:
+                named = ("--camera-site", console.camera_site())  # MultiSite grasps another site each episode
+                output = _deploy(
+                    children, task, seed, 1, record, args, "--perception", "camera", "--goal", *goal, *named
+                )
+            truth = console.stop()
             deployed(record, output)
             episodes += _episodes_from_truth(truth, [seed], threshold_m)
     return {"episodes": episodes, **timing, "output_tail": [o.strip().splitlines()[-3:] for o in outputs if o.strip()]}
@@ -331,11 +336,10 @@ def run(args: argparse.Namespace) -> int:
         f"ROS_DOMAIN_ID={domain_id} (loopback), force sensing {SENSING}",
         flush=True,
     )
-    with tempfile.TemporaryDirectory(prefix="rehearsal-") as tmp:
-        folder = Path(tmp)
+    with ChildProcesses("bench rehearsal", folder_prefix="rehearsal-") as children:
         for task in args.tasks:
             for mode in args.modes:
-                ros = _ros(task, mode, seeds, folder, args)
+                ros = _ros(task, mode, seeds, children, args)
                 local = _in_process(task, mode, seeds)
                 ros_k, local_k = _successes(ros["episodes"]), _successes(local)
                 low, _high = wilson_interval(local_k, len(local))

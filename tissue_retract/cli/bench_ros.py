@@ -22,6 +22,7 @@ import numpy as np
 from hardware_if.common.session import ros_session
 from psm_control.commands import JointCommand
 from sim.strict_json import write_strict_json
+from sim.sweep.stopping import ChildProcesses
 from tissue_retract.cli._checks import float_in
 from tissue_retract.cli._ros import add_bench_domain_argument, bench_domain_id
 
@@ -42,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_bench_domain_argument(parser)
 
 
-def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str, Any]:
+def _stream(rate_hz: float, duration_s: float, env: dict[str, str], children: ChildProcesses) -> dict[str, Any]:
     from hardware_if.client.psm_client import PsmClient  # the ros extra: rclpy, after the ROS environment is set
 
     count = max(1, round(rate_hz * duration_s))
@@ -60,7 +61,7 @@ def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str,
 
     command = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--rate", f"{rate_hz:g}"]
     command += ["--domain-id", env["ROS_DOMAIN_ID"]]
-    sim = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    sim = children.start("sim-dvrk", command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     holds = 0
     try:
         with PsmClient("PSM1", on_measured=on_measured) as psm:
@@ -84,11 +85,7 @@ def _stream(rate_hz: float, duration_s: float, env: dict[str, str]) -> dict[str,
             _wait_for_last(received, lock, timeout_s=2.0)  # the last echo, or what came within the bound
             achieved_hz = (count - 1) / (sent[-1] - sent[0]) if count > 1 else rate_hz
     finally:
-        sim.terminate()
-        try:
-            sim.wait(timeout=10.0)
-        except subprocess.TimeoutExpired:
-            sim.kill()
+        children.stop(sim)
     with lock:
         latency_ms = (received - sent)[~np.isnan(received)] * 1000.0
     return {
@@ -132,9 +129,9 @@ def run(args: argparse.Namespace) -> int:
 
     env = dict(os.environ)
     results = []
-    with ros_session():
+    with ros_session(), ChildProcesses("bench ros") as children:
         for rate in args.rates:
-            result = _stream(rate, args.duration, env)
+            result = _stream(rate, args.duration, env, children)
             results.append(result)
             print(
                 f"{rate:7.0f} Hz: {result['commands']:6d} commands, drops {result['drops']}, "

@@ -26,6 +26,7 @@ from rich.console import Console
 from rich.table import Table
 
 from sim.strict_json import write_strict_json
+from sim.sweep.stopping import pool_worker_start, stop_pool
 from tissue_retract.cli._checks import int_in
 from tissue_retract.cli._sensing import add_force_sensing_argument
 
@@ -119,10 +120,14 @@ def run(args: argparse.Namespace) -> int:
     ]
     groups += [(t, "generic", False, _COMPARED) for t in TASKS]
     rows: list[dict[str, Any]] = []
-    with ProcessPoolExecutor(max_workers=min(args.jobs, len(groups))) as pool:
+    with ProcessPoolExecutor(max_workers=min(args.jobs, len(groups)), initializer=pool_worker_start) as pool:
         futures = [pool.submit(_cell_group, *g, args.episodes, args.seed, args.force_sensing) for g in groups]
-        for future in futures:
-            rows += future.result()
+        try:
+            for future in futures:
+                rows += future.result()
+        except KeyboardInterrupt:  # a stop signal: the workers end now (they leave stopping to this process)
+            stop_pool(pool)
+            raise
     filtered = [r for r in rows if r["safety"] and not r["unstable"]]
     console = Console(width=150)
     table = Table(

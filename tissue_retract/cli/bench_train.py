@@ -31,6 +31,7 @@ from typing import Any
 
 from policies.recipe import ROBUST_RECIPE
 from sim.strict_json import write_strict_json
+from sim.sweep.stopping import ChildProcesses
 from tissue_retract.cli._checks import MAX_EPISODES, check_out_folder, float_in, int_in
 
 __all__ = ["add_arguments", "run"]
@@ -92,14 +93,15 @@ def run(args: argparse.Namespace) -> int:
         args.budget_s = ROBUST_RECIPE.budget_s if args.robust else 300.0
     check_out_folder(args.out, (), ())
     rows: list[dict[str, Any]] = []
-    for task in tasks:
-        for seed in args.seeds:
-            rows.append(_train_and_confirm(task, seed, args))
-            row = rows[-1]
-            print(
-                f"{task} seed {seed}: {row['wall_s']:.1f} s, kept episode {row['policy_episode']}, "
-                + _confirmed(row, args)
-            )
+    with ChildProcesses("bench train") as children:
+        for task in tasks:
+            for seed in args.seeds:
+                rows.append(_train_and_confirm(task, seed, args, children))
+                row = rows[-1]
+                print(
+                    f"{task} seed {seed}: {row['wall_s']:.1f} s, kept episode {row['policy_episode']}, "
+                    + _confirmed(row, args)
+                )
     summary = {task: _summary([r for r in rows if r["task"] == task]) for task in tasks}
     print()
     print(f"{'task':28s} {'median to a confirmed policy':>30s}   runs (s; * not reached)")
@@ -129,7 +131,7 @@ def _confirmed(row: dict[str, Any], args: argparse.Namespace) -> str:
     )
 
 
-def _train_and_confirm(task: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+def _train_and_confirm(task: str, seed: int, args: argparse.Namespace, children: ChildProcesses) -> dict[str, Any]:
     out = Path(args.out) / task / f"s{seed}"
     out.mkdir(parents=True, exist_ok=True)
     shutil.rmtree(out / "sweep", ignore_errors=True)  # an earlier bench's confirmation, of another policy
@@ -138,12 +140,12 @@ def _train_and_confirm(task: str, seed: int, args: argparse.Namespace) -> dict[s
     command += ["--out", str(out), "--fresh", "--no-progress", "--no-tensorboard", "--budget-s", f"{args.budget_s:g}"]
     with (out / "train.log").open("w") as log:
         start = time.perf_counter()
-        status = subprocess.run(command, stdout=log, stderr=subprocess.STDOUT, check=False).returncode
+        status = children.run("train", command, stdout=log, stderr=subprocess.STDOUT).returncode
         wall_s = time.perf_counter() - start
     row: dict[str, Any] = {"task": task, "seed": seed, "wall_s": wall_s, "exit_status": status}
     policy = out / "policy.safetensors"
     if args.robust:
-        success, expert = _confirm_on_sweep(task, seed, args) if status == 0 else (0.0, math.nan)
+        success, expert = _confirm_on_sweep(task, seed, args, children) if status == 0 else (0.0, math.nan)
         row["expert_success"] = expert
         reached = success >= expert - args.below_expert
     else:
@@ -156,7 +158,7 @@ def _train_and_confirm(task: str, seed: int, args: argparse.Namespace) -> dict[s
     return row
 
 
-def _confirm_on_sweep(task: str, seed: int, args: argparse.Namespace) -> tuple[float, float]:
+def _confirm_on_sweep(task: str, seed: int, args: argparse.Namespace, children: ChildProcesses) -> tuple[float, float]:
     """The kept policy's and the scripted expert's success on the robustness sweep the recipe trains over."""
     task_folder = Path(args.out) / task
     out = task_folder / f"s{seed}" / "sweep"
@@ -170,7 +172,7 @@ def _confirm_on_sweep(task: str, seed: int, args: argparse.Namespace) -> tuple[f
     command += ["--vary", str(ROBUST_RECIPE.vary), "--force-sensing", "ideal", "--beside-expert", "--no-progress"]
     command += ["--out", str(out)]
     with (out.parent / "sweep.log").open("w") as log:
-        subprocess.run(command, stdout=log, stderr=subprocess.STDOUT, check=False)
+        children.run("robustness", command, stdout=log, stderr=subprocess.STDOUT)
     summary = json.loads((out / "summary.json").read_text())  # written even when some episodes failed
     return float(summary["success_rate"]), float(summary["expert_success"])
 

@@ -20,7 +20,7 @@ writes the scene's true state as JSON lines at the policy rate (``t``, ``grasped
 or a named one of the flap (``centre``, ``left``, ``right``), as an operator holds them there to
 ``register`` it: registration rehearsed end to end. It refuses to start when another console already serves
 the arm on the domain (it looks for one for 3.5 s first), and warns on ``/<arm>/warning`` when commands come
-from more than one node. Needs the ``ros`` extra. Ctrl-C stops it.
+from more than one node. Needs the ``ros`` extra. Ctrl-C (or SIGTERM, SIGHUP) stops it.
 """
 
 from __future__ import annotations
@@ -51,6 +51,9 @@ from tissue_retract.cli._checks import MAX_EPISODES, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
 
 __all__ = ["add_arguments", "run"]
+
+#: Signals that stop the console as Ctrl-C does (its exit status stays 0: stopping is how a console ends).
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -153,9 +156,11 @@ def run(args: argparse.Namespace) -> int:
     # Python's own Ctrl-C handling, not rclpy's: rclpy's shuts the context down from under a timer
     # callback's publish; a KeyboardInterrupt stops between two Python statements instead (installed
     # explicitly: a process started in the background of a script inherits SIGINT ignored, one started
-    # from a thread that blocks it inherits it blocked).
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    # from a thread that blocks it inherits it blocked). SIGTERM and SIGHUP stop it the same way: the
+    # default SIGTERM ended it at once, its DDS participant and its endoscope's render process not closed.
+    for sig in _STOP_SIGNALS:
+        signal.signal(sig, signal.default_int_handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
     with live_view as live, ros_session(signal_handlers=False):
         node: SimulatedPsm | None = None
         truth: TruthLog | None = None
@@ -213,7 +218,8 @@ def run(args: argparse.Namespace) -> int:
             # From here Ctrl-C asks the loop to end: a KeyboardInterrupt raised in a callback that the C++
             # events executor runs is logged as a fatal callback error on its way out.
             stop = threading.Event()
-            signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
+            for sig in _STOP_SIGNALS:
+                signal.signal(sig, lambda _signal, _frame: stop.set())
             endoscope = task.endoscope if task is not None else None
             while node.context.ok() and not stop.is_set():  # spin_once: see hardware_if.common.executor
                 executor.spin_once(timeout_sec=0.05)
