@@ -49,9 +49,13 @@ from safety.smoother import JointSmoother
 from safety.stiffness import StiffnessEstimator
 from safety.verifier import CommandVerifier
 
-__all__ = ["ControlChain", "default_limits"]
+__all__ = ["DEADMAN_STOP", "ControlChain", "default_limits"]
 
 _TRACKING_TOLERANCE = 1e-6
+#: How the reason of a stop for a stale measurement begins: its stamp is older than the deadman timeout by
+#: the chain's own clock (which starts at the stamp of the measurement it was reset with). A deploy to a
+#: robot holds on it.
+DEADMAN_STOP = "deadman: "
 
 
 def default_limits(config: SafetyConfig) -> list[Limit]:
@@ -246,7 +250,7 @@ class ControlChain:
         if not math.isfinite(stamp):
             return "bad measurement: stamp is not finite"
         if now - stamp > self.config.deadman_timeout_s:
-            return f"deadman: measurement {now - stamp:.3g} s old > {self.config.deadman_timeout_s} s"
+            return f"{DEADMAN_STOP}measurement {now - stamp:.3g} s old > {self.config.deadman_timeout_s} s"
         q = np.asarray(measured.q, dtype=float)
         # One comparison passes a finite in-limit vector (NaN fails it); anything else gets the detailed check.
         if q.shape != self.model.lower.shape or not all_of(np.abs(q - self._q_center) <= self._q_half):

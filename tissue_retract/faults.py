@@ -3,8 +3,9 @@
 Each :class:`Fault` runs a real ``tissue-retract deploy`` (and, for the dVRK target, a real
 ``tissue-retract sim-dvrk`` on a loopback-only ROS domain of its own) as child processes and injects one
 fault: a policy that raises, exits, returns garbage or overruns; a non-finite message on a subscribed
-topic; a tracking error; an arm disabled mid-episode or never enabled; a console that dies; a stop signal;
-a SIGKILL of the deploy. :func:`run_fault` reports the exit status, the hold line and what the recording
+topic; a tracking error; an arm disabled mid-episode or never enabled; a console that dies; a console whose
+clock on ``measured_js`` freezes, goes back or jumps (``sim-dvrk --stamp-fault``); a stop signal; a SIGKILL
+of the deploy. :func:`run_fault` reports the exit status, the hold line and what the recording
 kept. ``tissue-retract bench faults`` runs them all; the tests run them one by one.
 
 Nothing here is timed by sleeping: the faulty policies (:class:`FaultPolicy`) act at a chosen episode
@@ -179,7 +180,8 @@ class Fault:
             ``other-arm`` / ``exact-sensing`` / ``other-console`` (a calibration file made for PSM2, fitted
             on a console that reports the exact force, or fitted on a real dVRK and used on sim-dvrk),
             ``interrupt-calibration`` (``calibrate-wrench`` stopped by SIGINT during its first excitation,
-            in place of a deploy).
+            in place of a deploy), ``stamp-fault`` (the console's ``--stamp-fault`` given in ``console``, started
+            with SIGUSR1 while the policy waits at the fault step; the gate opens once the deploy holds).
         status: Expected exit status (0: the deploy must not hold at all; 1: it refuses before it starts).
         reason: Text the hold (or interruption) reason must contain ("" with status 0).
         also: Other reasons that are as correct: a fault that trips two checks holds on whichever the deploy
@@ -190,6 +192,7 @@ class Fault:
         default_deadman: Keep the default deadman timeout (only the stale fault); others use a 1 s deadman
             so that a loaded machine's scheduling cannot trip it before the fault is injected.
         default_budget: Keep the default policy budget (the overrun fault); others allow 600 s, the gate's.
+        console: More ``sim-dvrk`` arguments.
     """
 
     name: str
@@ -204,6 +207,7 @@ class Fault:
     default_deadman: bool = False
     default_budget: bool = False
     also: tuple[str, ...] = ()
+    console: tuple[str, ...] = ()
 
     @property
     def leaves_nothing(self) -> bool:
@@ -388,6 +392,35 @@ FAULTS: tuple[Fault, ...] = (
         130,
         "stopped by SIGINT during excitation 1 of 2: no calibration written",
         action="interrupt-calibration",
+    ),
+    # The console's clock on measured_js (docs/dvrk.md, "The deadman's timeout"): a measurement is new only when
+    # its stamp advanced, and a stamp that goes back or jumps is invalid data.
+    Fault(
+        "measured_js frozen (same stamp repeated)",
+        "dvrk",
+        "Gate",
+        4,
+        "stale: measured_js stamp has not advanced",
+        action="stamp-fault",
+        console=("--stamp-fault", "frozen"),
+    ),
+    Fault(
+        "measured_js stamps 5 s in the past",
+        "dvrk",
+        "Gate",
+        4,
+        "invalid data: measured_js: stamp went back",
+        action="stamp-fault",
+        console=("--stamp-fault", "past"),
+    ),
+    Fault(
+        "measured_js stamps jump +1 h, then frozen",
+        "dvrk",
+        "Gate",
+        4,
+        "invalid data: measured_js: stamp jumped",
+        action="stamp-fault",
+        console=("--stamp-fault", "jump"),
     ),
     Fault("disk full mid-episode", "dvrk", "FaultPolicy", 4, "recording failed", "disk-full", episodes=3, at="-1:0"),
     Fault("disk full (sim)", "sim", "FaultPolicy", 4, "recording failed", action="disk-full", episodes=40, at="-1:0"),
@@ -679,7 +712,7 @@ def _run_fault_in(
         if fault.target == "dvrk" and fault.status != 1:  # a refusal at start reaches no console
             server = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--domain-id", str(domain_id)]
             camera = ("--blind", "--endoscope") if "--perception" in fault.extra else ()  # the jaw tells the grasp
-            console = _start([*server, "--task", "lift", "--seed", str(SEED), *camera], env)
+            console = _start([*server, "--task", "lift", "--seed", str(SEED), *camera, *fault.console], env)
             dry = "--dry-run" in fault.extra and "not ready" not in fault.reason
             if dry or fault.action == "interrupt-calibration":
                 _ready_arm(env, domain_id, guard_s)
@@ -729,6 +762,9 @@ def _run_fault_in(
             # The injector both disables and commands the arm: the deploy holds on whichever it sees first.
             held = tuple(f"holding, {reason}" for reason in (fault.reason, *fault.also))
             injector.flood([(publisher, message)], lines, held, guard_s)
+        elif fault.action == "stamp-fault" and console is not None:
+            console.send_signal(signal.SIGUSR1)  # the console's clock goes wrong while the policy waits
+            lines.wait_for("holding, ", min(guard_s, 60.0))  # the deadman saw it (the gate then lets it tick)
         elif fault.action == "kill-console" and console is not None:
             console.kill()
             console.wait()

@@ -3,7 +3,10 @@
 :class:`ArmListener` subscribes to the arm's state and event topics (joints, jaw, poses, force, operating
 state, errors) and keeps the latest of each. Every message is checked first: the first malformed or
 non-finite one latches a data fault, after which the client's deadman holds
-(:class:`~hardware_if.client.psm_client.PsmClient`, which adds the commands to this). Its reads never
+(:class:`~hardware_if.client.psm_client.PsmClient`, which adds the commands to this). A ``measured_js`` is
+a new measurement only when its stamp advanced: one stamped as the last is a repeat (it does not make the
+measurement fresh), and a stamp that went back or jumped ahead is a data fault
+(:func:`~hardware_if.client.deadman.stamp_step_fault`). Its reads never
 block; its waits block until the console has published what they wait for, or time out. The force is the
 console's ``body/measured_cf``, or the joint efforts with a wrench calibration's model removed.
 """
@@ -24,6 +27,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 from std_msgs.msg import String  # type: ignore[import-untyped]
 
+from hardware_if.client.deadman import STAMP_JUMP_S, stamp_step_fault
 from hardware_if.client.task_estimate import JawReading
 from hardware_if.common import convert
 from hardware_if.common.crtk import JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, event_qos, periodic_qos
@@ -73,7 +77,8 @@ class ArmListener(Node):
         self._data_fault = ""
         self._on_measured = on_measured
         self._measured: JointState | None = None
-        self._measured_rx_s: float | None = None
+        self._measured_rx_s: float | None = None  # when the latest measured_js with a new stamp arrived
+        self._repeated_rx_s: float | None = None  # when that measurement last arrived again, stamp unchanged
         self._setpoint_q: np.ndarray | None = None
         self._jaw = 0.0
         self._jaw_velocity = 0.0
@@ -160,9 +165,27 @@ class ArmListener(Node):
             self._on_measured(message, time.perf_counter())
         if self._joints(message, "measured_js") is None:
             return  # never used: the deadman holds on the latched fault
+        rx_s = time.monotonic()
         with self._lock:
+            previous = self._measured
+            if previous is not None and self._measured_rx_s is not None:
+                stamp, last = message.header.stamp, previous.header.stamp
+                if (stamp.sec, stamp.nanosec) == (last.sec, last.nanosec):
+                    self._repeated_rx_s = rx_s  # the same measurement again: it stays as old as it was
+                    return
+                fault = stamp_step_fault(
+                    convert.time_to_seconds(last),
+                    self._measured_rx_s,
+                    convert.time_to_seconds(stamp),
+                    rx_s,
+                    STAMP_JUMP_S,
+                )
+                if fault:
+                    self._invalid("measured_js", fault)
+                    return
             self._measured = message
-            self._measured_rx_s = time.monotonic()
+            self._measured_rx_s = rx_s
+            self._repeated_rx_s = None
             self._lock.notify_all()
 
     def _on_setpoint_js(self, message: JointState) -> None:

@@ -5,6 +5,14 @@ stops thinking must not leave the arm chasing an old goal, and a client whose me
 not keep sending new ones. :class:`Deadman` decides, from facts the client gathers (message ages,
 publisher counts, the operating state, measured vs setpoint joints), whether commanding is safe. It
 has no ROS in it, so each rule can be tested alone.
+
+A measurement is fresh when its stamp advanced, not merely when a message arrived: the dVRK stamps each
+``measured_js`` with the time its sample was read and publishes at its own rate (100 Hz by default, up to
+1 kHz), so each one is stamped later than the one before. A console that repeats its last message (same
+stamp) is as stale as one that went silent; a stamp that goes back, or runs ahead of the arrivals by more
+than :data:`STAMP_JUMP_S`, is no clock the deadman can judge age by (:func:`stamp_step_fault`). Stamps are
+judged against each other and the intervals between arrivals, never against this machine's clock: the
+console's may differ from ours.
 """
 
 from __future__ import annotations
@@ -18,7 +26,42 @@ from hardware_if.common.crtk import JOINT_NAMES, TRACKING_TOLERANCE
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig
 
-__all__ = ["ArmFacts", "Deadman", "DeadmanStatus"]
+__all__ = ["STAMP_JUMP_S", "ArmFacts", "Deadman", "DeadmanStatus", "stamp_step_fault"]
+
+#: How far a ``measured_js`` stamp may advance beyond the time between its arrival and the previous one's [s].
+#: The excess is how much longer the previous message was under way than this one: about 0.12 s at the most
+#: under load (the largest age of a measurement at a tick seen on a busy machine, docs/dvrk.md), so 1 s
+#: (a hundred of the dVRK's 100 Hz periods) is a clock that jumped, never a late message.
+STAMP_JUMP_S = 1.0
+
+
+def stamp_step_fault(
+    previous_stamp_s: float, previous_rx_s: float, stamp_s: float, rx_s: float, jump_s: float = STAMP_JUMP_S
+) -> str:
+    """What is wrong with a ``measured_js`` stamp after the previous one, or "" when it may follow it.
+
+    Args:
+        previous_stamp_s: The previous measurement's stamp (the console's clock) [s].
+        previous_rx_s: When it first arrived (this machine's monotonic clock) [s].
+        stamp_s: This measurement's stamp [s].
+        rx_s: When it arrived [s].
+        jump_s: Largest advance of the stamp beyond the time between the arrivals [s].
+
+    Returns:
+        "" for a stamp that advanced no further than the arrivals allow, or one equal to the previous (a
+        repeat: not a fault here, but no new measurement either); otherwise ``stamp went back ...`` or
+        ``stamp jumped ...`` (the listener says it as ``invalid data: measured_js: ...``).
+    """
+    step = stamp_s - previous_stamp_s
+    if step < 0.0:
+        return f"stamp went back {-step:.3g} s (each measurement is stamped later than the one before)"
+    between = rx_s - previous_rx_s
+    if step - between > jump_s:
+        return (
+            f"stamp jumped {step:.4g} s ahead in {between:.3g} s between arrivals "
+            f"(at most {jump_s:g} s more than the time between arrivals)"
+        )
+    return ""
 
 
 class ArmFacts(NamedTuple):
@@ -26,7 +69,7 @@ class ArmFacts(NamedTuple):
 
     Attributes:
         now_s: Client's monotonic clock [s].
-        measured_rx_s: When the latest ``measured_js`` arrived [s], None if never.
+        measured_rx_s: When the latest ``measured_js`` with a new stamp arrived [s], None if never.
         publishers: Number of publishers of ``measured_js`` seen in the ROS graph (-1 if unknown).
         state: Latest ``operating_state.state`` ("" if never received).
         is_homed: Latest ``operating_state.is_homed``.
@@ -35,6 +78,8 @@ class ArmFacts(NamedTuple):
         data_fault: The first malformed or non-finite message on a subscribed topic ("" if none).
         conflict: Another commander or console of the arm in the ROS graph ("" if none), as
             :meth:`hardware_if.common.commander_watch.CommanderWatch.conflict` words it.
+        repeated_rx_s: When a ``measured_js`` stamped as the latest one last arrived again [s] (the console
+            repeats its measurement), None if none has since.
     """
 
     now_s: float
@@ -46,6 +91,7 @@ class ArmFacts(NamedTuple):
     setpoint_q: np.ndarray | None
     data_fault: str = ""
     conflict: str = ""
+    repeated_rx_s: float | None = None
 
 
 class DeadmanStatus(NamedTuple):
@@ -69,8 +115,9 @@ class Deadman:
     """Latching deadman over the dVRK's state, with the dVRK's own tracking tolerances.
 
     Args:
-        timeout_s: Largest allowed age of the latest ``measured_js`` [s]; default the chain's
-            ``SafetyConfig.deadman_timeout_s`` (0.15 s, 15 periods of the dVRK's 100 Hz publication).
+        timeout_s: Largest allowed age of the latest ``measured_js`` with a new stamp (by its arrival) [s];
+            default the chain's ``SafetyConfig.deadman_timeout_s`` (0.15 s, 15 periods of the dVRK's 100 Hz
+            publication).
         tracking_tolerance: Largest |measured - setpoint| per joint before tripping; default the dVRK's
             (0.5 rad yaw/pitch, 0.05 m insertion, 0.6 rad roll and wrist).
 
@@ -105,6 +152,11 @@ class Deadman:
             return "no measurement: measured_js never received"
         age = facts.now_s - facts.measured_rx_s
         if age > self.timeout_s:
+            if facts.repeated_rx_s is not None and facts.repeated_rx_s > facts.measured_rx_s:
+                return (
+                    f"stale: measured_js stamp has not advanced for {age:.3f} s (timeout {self.timeout_s:.3f} s; "
+                    "the console repeats its last measurement)"
+                )
             return f"stale: measured_js {age:.3f} s old (timeout {self.timeout_s:.3f} s)"
         if facts.state != "ENABLED" or not facts.is_homed:
             state = facts.state or "unknown"

@@ -4,9 +4,10 @@
 :class:`~hardware_if.client.arm_listener.ArmListener` it is, and publishes its commands. It spins its own
 executor on a background thread, so :meth:`PsmClient.measure` and :meth:`PsmClient.servo_jp` are plain
 calls from the control loop, the same as on the simulation. A :class:`~hardware_if.client.deadman.Deadman`
-guards every motion command: on a stale measurement, a vanished publisher, an arm not ENABLED and homed,
-or a tracking error beyond the dVRK's tolerances, the client stops forwarding commands, holds by
-re-sending the arm's current set-point, logs the reason once, and reports it in :attr:`PsmClient.status`.
+guards every motion command: on a stale measurement (one whose stamp stopped advancing is stale too), a
+vanished publisher, an arm not ENABLED and homed, or a tracking error beyond the dVRK's tolerances, the
+client stops forwarding commands, holds by re-sending the arm's current set-point, logs the reason once,
+and reports it in :attr:`PsmClient.status`.
 """
 
 from __future__ import annotations
@@ -195,6 +196,7 @@ class PsmClient(ArmListener):
             setpoint_q=self._setpoint_q,
             data_fault=self._data_fault,
             conflict=self._conflict,
+            repeated_rx_s=self._repeated_rx_s,
         )
 
     def _apply_deadman(self) -> DeadmanStatus:

@@ -33,6 +33,7 @@ from hardware_if.common.errors import DvrkError
 from hardware_if.console.arm_model import ArmModel, ArmSample, KinematicArm
 from hardware_if.console.console_guard import other_consoles
 from hardware_if.console.motion import JointTrajectory
+from hardware_if.console.stamp_fault import StampFault
 from hardware_if.console.state_topics import StateTopics
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
@@ -71,6 +72,8 @@ class ConsoleArm(Node):
             console's uncompensated estimate, so that a rehearsal meets the sensor the robot has.
         exclusive: Refuse to serve an arm that another console already serves on the domain (waits up to
             :data:`~hardware_if.console.console_guard.CONSOLE_DISCOVERY_S` for discovery first).
+        stamp_fault: A clock fault to inject on ``measured_js`` (:mod:`~hardware_if.console.stamp_fault`),
+            said on ``warning`` when it starts; None: none.
 
     Raises:
         DvrkError: ``exclusive`` and another node already publishes the arm's ``measured_js``.
@@ -90,6 +93,7 @@ class ConsoleArm(Node):
         context: Any = None,
         sensor: ForceSensor | None = None,
         exclusive: bool = False,
+        stamp_fault: StampFault | None = None,
     ) -> None:
         if not (np.isfinite(rate_hz) and 1.0 <= rate_hz <= 5000.0):
             raise ConfigurationError("rate_hz", rate_hz, "a publishing rate in 1..5000 Hz")
@@ -132,6 +136,10 @@ class ConsoleArm(Node):
         self._answered = False  # a servo command's measured_js and setpoint_js went out since the last tick
 
         self.state_topics = StateTopics(self, self.topics)
+        self.stamp_fault = stamp_fault
+        if stamp_fault is not None:
+            stamp_fault.on_start = lambda text: self._event("warning", f"{self.topics.arm}: {text}")
+            self.state_topics.stamp_fault = stamp_fault
         event = event_qos()
         t = self.topics.topic
         self._operating_state = self.create_publisher(OperatingState, t("operating_state"), event)

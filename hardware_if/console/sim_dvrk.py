@@ -31,6 +31,9 @@
   PyBullet moves kinematically), as in the dVRK's own KINEMATIC simulation. The console switches to
   effort mode as the dVRK does (any trajectory stops), the arm holds where it is, the commanded effort
   is echoed on ``setpoint_js.effort`` and a warning says that efforts are not simulated.
+- A clock fault on ``measured_js`` when asked (``stamp_fault``, ``sim-dvrk --stamp-fault``): the last
+  message repeated, stamps 5 s in the past, or one stamp 1 h ahead then repeated
+  (:mod:`~hardware_if.console.stamp_fault`), to rehearse a client's deadman against it.
 - Services (``crtk_msgs/srv``): ``forward_kinematics`` (pose in ``<arm>_base``),
   ``local/forward_kinematics`` (about the RCM) and ``inverse_kinematics`` (goal about the RCM, from the
   request's joints), with the dVRK's ``result``/``message`` conventions.
@@ -132,6 +135,8 @@ class SimulatedPsm(ConsoleArm):
         q = self._joints(message, "servo_jp", strict=False)
         if q is not None:
             self._servo_now(q)
+            if self.stamp_fault is not None:
+                self.stamp_fault.servo_command()
 
     def _on_servo_jr(self, message: JointState) -> None:
         if not self._ready("servo_jr"):

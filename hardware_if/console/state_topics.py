@@ -17,6 +17,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension  # type: ignore[
 from hardware_if.common import convert
 from hardware_if.common.crtk import JAW_JOINT_NAME, JOINT_NAMES, ArmTopics, periodic_qos
 from hardware_if.console.arm_model import ArmSample
+from hardware_if.console.stamp_fault import StampFault
 from psm_control.robot import PsmConfiguration
 
 __all__ = ["StateTopics"]
@@ -28,10 +29,14 @@ class StateTopics:
     Args:
         node: The console's node.
         topics: The arm's topic names.
+
+    Attributes:
+        stamp_fault: What becomes of each ``measured_js`` once an injected clock fault starts (None: nothing).
     """
 
     def __init__(self, node: Node, topics: ArmTopics) -> None:
         self.topics = topics
+        self.stamp_fault: StampFault | None = None
         state = periodic_qos()
         t = topics.topic
         create = node.create_publisher
@@ -75,9 +80,10 @@ class StateTopics:
             effort = efforts
             if effort_mode:
                 effort = effort + setpoint_effort
-            self._pub["measured_js"].publish(
-                convert.joint_state(JOINT_NAMES, sample.q, sample.qd, effort, stamp_s=stamp)
-            )
+            message = convert.joint_state(JOINT_NAMES, sample.q, sample.qd, effort, stamp_s=stamp)
+            if self.stamp_fault is not None:
+                message = self.stamp_fault.measured(message)
+            self._pub["measured_js"].publish(message)
         if self.subscribed("setpoint_js"):
             self._pub["setpoint_js"].publish(
                 convert.joint_state(JOINT_NAMES, setpoint_q, effort=setpoint_effort, stamp_s=stamp)

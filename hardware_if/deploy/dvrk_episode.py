@@ -1,8 +1,10 @@
 """One episode on a dVRK: the policy's steps, the chain's ticks at the control rate, each tick recorded.
 
 Every tick the deadman's verdict and the arm's tracking of the commands are checked: a fault raises a
-hold after the tick that saw it was recorded. A dry run computes and records the same ticks and sends
-nothing; it predicts the force the commands would have caused instead.
+hold after the tick that saw it was recorded. The chain's own deadman (a measurement stamped older than
+the timeout by the chain's clock) is a hold too, not a safety stop the episode runs on after. A dry run
+computes and records the same ticks and sends nothing; it predicts the force the commands would have
+caused instead.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from hardware_if.deploy.report import DeployReport, account, account_excursions,
 from hardware_if.deploy.stopping import Stopper
 from hardware_if.recording.recorder import Recorder
 from psm_control.commands import CartesianDelta, JointCommand, MeasuredState
+from safety.chain import DEADMAN_STOP
 from safety.force_watch import ForceLimitWatch
 from sim.scene3d import PsmScene
 from sim.scene_stream import SceneStream
@@ -124,6 +127,8 @@ def dvrk_episode(
                     )
                 if diverged and status.ok:  # nothing more is sent; the cause, once discovery shows it, is named
                     status = status._replace(ok=False, reason=client.exclusive_within(DISCOVERY_S) or diverged)
+                if status.ok and output.safety_stop and output.reason.startswith(DEADMAN_STOP):
+                    status = status._replace(ok=False, reason=f"stale: the chain's {output.reason}")
                 if not status.ok:  # the dry run holds as the deploy would: it rehearses the real thing
                     fault = deadman_hold(status.reason)
                     fault.data.update(episode=episode, step=step, measured=measured_payload(measured))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hardware_if.client.deadman import ArmFacts, Deadman
+from hardware_if.client.deadman import STAMP_JUMP_S, ArmFacts, Deadman, stamp_step_fault
 from psm_control.errors import ConfigurationError
 
 Q = np.array([0.1, -0.1, 0.12, 0.0, 0.2, -0.2])
@@ -69,3 +69,35 @@ def test_bad_settings_are_rejected() -> None:
         Deadman(timeout_s=0.0)
     with pytest.raises(ConfigurationError, match="tracking_tolerance"):
         Deadman(tracking_tolerance=np.ones(3))
+
+
+def test_a_repeated_measurement_goes_stale_by_its_stamp() -> None:
+    """A console that repeats its last measurement (same stamp) holds once the timeout passed since the stamp
+    last advanced, and the reason says the stamp has not advanced, however recently the repeat arrived."""
+    repeated = _facts(now_s=10.0, measured_rx_s=9.84, repeated_rx_s=9.999)
+    status = Deadman(timeout_s=0.15).update(repeated)
+    assert status.holding and status.reason.startswith("stale: measured_js stamp has not advanced for 0.160 s")
+    assert Deadman(timeout_s=0.15).update(repeated._replace(measured_rx_s=9.86)).ok  # within the timeout
+
+
+@pytest.mark.parametrize(
+    ("previous", "stamp", "between_s", "fault"),
+    [
+        (100.0, 100.01, 0.01, ""),  # one period later, one period between arrivals
+        (100.0, 100.2, 0.01, ""),  # a late message followed by a prompt one: within the jump allowance
+        (100.0, 100.01, 2.0, ""),  # a console that stalled and came back: its stamps did not run ahead
+        (100.0, 100.0, 0.01, ""),  # a repeat: no fault here, and no new measurement (the listener's rule)
+        (100.0, 95.01, 0.01, "stamp went back 4.99 s"),
+        (100.0, 99.9999, 0.01, "stamp went back 0.0001 s"),
+        (100.0, 3700.0, 0.01, "stamp jumped 3600 s ahead"),
+        (100.0, 100.01 + STAMP_JUMP_S + 0.001, 0.01, "stamp jumped"),
+        (100.0, 100.01 + STAMP_JUMP_S - 0.001, 0.01, ""),
+    ],
+)
+def test_stamps_are_judged_against_each_other_and_the_arrivals(
+    previous: float, stamp: float, between_s: float, fault: str
+) -> None:
+    """A stamp may not go back, nor run ahead of the arrivals by more than STAMP_JUMP_S; the console's clock
+    itself may be anywhere (these stamps are 100 s after its epoch, and the arrivals on another clock)."""
+    found = stamp_step_fault(previous, 5.0, stamp, 5.0 + between_s)
+    assert found.startswith(fault) if fault else found == "", found

@@ -1,7 +1,9 @@
-"""The simulated console's faults, in-process over loopback DDS: a SimulatedPsm whose arm cannot follow."""
+"""The simulated console's faults, in-process over loopback DDS: a SimulatedPsm whose arm cannot follow, and one
+whose clock on measured_js goes wrong (--stamp-fault)."""
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from collections.abc import Iterator
@@ -19,6 +21,7 @@ from std_msgs.msg import String
 from hardware_if.common.crtk import JOINT_NAMES, ArmTopics, event_qos, periodic_qos
 from hardware_if.console.arm_model import ArmSample, KinematicArm
 from hardware_if.console.sim_dvrk import SimulatedPsm
+from hardware_if.console.stamp_fault import JUMP_S, PAST_S, StampFault
 
 
 class BlockedInsertion(KinematicArm):
@@ -97,3 +100,77 @@ def test_tracking_error_trips_to_fault_and_enable_recovers(console: tuple[Simula
     _send(operator, "enable")
     assert wait_until(lambda: operator.state()[0] == "ENABLED", timeout_s=30.0)
     np.testing.assert_allclose(sim._setpoint_q, np.zeros(6), atol=1e-12)  # recovered where the arm is
+
+
+class Listener(Node):
+    """What a client receives on measured_js (each stamp with its arrival on the wall clock) and on warning."""
+
+    def __init__(self, arm: str, context: rclpy.Context) -> None:
+        super().__init__(f"listener_{time.monotonic_ns()}", context=context)
+        t = ArmTopics(arm).topic
+        self.lock = threading.Lock()
+        self.arrivals: list[tuple[float, float]] = []
+        self.warnings: list[str] = []
+        self.create_subscription(JointState, t("measured_js"), self._on_measured, periodic_qos())
+        self.create_subscription(String, t("warning"), lambda m: self.warnings.append(m.data), event_qos())
+        self.servo = self.create_publisher(JointState, t("servo_jp"), periodic_qos())
+
+    def _on_measured(self, message: JointState) -> None:
+        stamp = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+        with self.lock:
+            self.arrivals.append((stamp, time.time()))
+
+    def since(self, start: int) -> list[tuple[float, float]]:
+        with self.lock:
+            return self.arrivals[start:]
+
+
+@pytest.mark.parametrize("mode", ["frozen", "past", "jump"])
+def test_stamp_fault_breaks_the_measured_js_clock_after_the_nth_servo_command(mode: str) -> None:
+    """sim-dvrk's --stamp-fault: measured_js is stamped with the console's clock until the N-th servo_jp; then
+    frozen repeats the last message, past stamps 5 s in the past, jump stamps 1 h ahead once and repeats it."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    fault = StampFault(mode, after_commands=3)
+    sim = SimulatedPsm("PSM6", homing_settle_s=0.0, context=context, stamp_fault=fault)
+    listener = Listener("PSM6", context)
+    operator = Operator("PSM6", context)
+    executor = MultiThreadedExecutor(context=context)
+    for node in (sim, listener, operator):
+        executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    try:
+        assert wait_until(lambda: operator.command.get_subscription_count() > 0 and operator.states, timeout_s=30.0)
+        _send(operator, "home")
+        assert wait_until(lambda: operator.state() == ("ENABLED", True, False), timeout_s=30.0), operator.states
+        assert wait_until(lambda: listener.servo.get_subscription_count() > 0, timeout_s=30.0)
+        goal = JointState(name=list(JOINT_NAMES))
+        goal.position = [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]
+        for _ in range(2):
+            listener.servo.publish(goal)
+        assert wait_until(lambda: len(listener.since(0)) >= 5, timeout_s=30.0)
+        assert not fault.active
+        stamps = [stamp for stamp, _ in listener.since(0)]
+        assert all(b > a for a, b in itertools.pairwise(stamps)), "the console's clock advances"
+        listener.servo.publish(goal)  # the third: the fault starts with the next measured_js
+        assert wait_until(lambda: fault.active, timeout_s=30.0)
+        assert wait_until(lambda: any("injected fault" in w for w in listener.warnings), timeout_s=30.0)
+        start = len(listener.since(0))
+        assert wait_until(lambda: len(listener.since(start)) >= 30, timeout_s=30.0)
+        faulty = listener.since(start)[-10:]  # long after the fault started, whatever arrived late
+        behind = [arrived - stamp for stamp, arrived in faulty]  # how far each stamp is behind its arrival [s]
+        if mode == "frozen":
+            assert len({stamp for stamp, _ in faulty}) == 1, "the same stamp again and again"
+        elif mode == "past":
+            assert all(PAST_S <= b < PAST_S + 10.0 for b in behind), behind
+            assert all(b[0] > a[0] for a, b in itertools.pairwise(faulty)), "and advancing"
+        else:
+            assert len({stamp for stamp, _ in faulty}) == 1, "one stamp, repeated"
+            assert all(-JUMP_S <= b < -JUMP_S + 10.0 for b in behind), behind
+    finally:
+        executor.shutdown()
+        thread.join(timeout=5.0)
+        for node in (sim, listener, operator):
+            node.destroy_node()
+        rclpy.shutdown(context=context)

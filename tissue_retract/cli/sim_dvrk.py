@@ -21,6 +21,11 @@ or a named one of the flap (``centre``, ``left``, ``right``), as an operator hol
 ``register`` it: registration rehearsed end to end. It refuses to start when another console already serves
 the arm on the domain (it looks for one for 3.5 s first), and warns on ``/<arm>/warning`` when commands come
 from more than one node. Needs the ``ros`` extra. Ctrl-C (or SIGTERM, SIGHUP) stops it.
+
+``--stamp-fault MODE`` breaks the console's clock on ``measured_js``, to rehearse a deploy's deadman against
+it, from the ``--stamp-fault-after``-th accepted ``servo_jp`` on or when the process gets SIGUSR1:
+``frozen`` (the last ``measured_js`` repeated, same stamp and sample), ``past`` (stamped 5 s in the past),
+``jump`` (one stamped 1 h ahead, then repeated).
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ from hardware_if.common.session import require_ros, ros_session
 from hardware_if.common.task_topics import DEFAULT_RIG, camera_topics
 from hardware_if.console.endoscope_stream import EndoscopeStream
 from hardware_if.console.sim_task import PLACEABLE_SITES, TaskArm, TaskTopics, TruthLog
+from hardware_if.console.stamp_fault import STAMP_FAULTS, StampFault
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
@@ -120,6 +126,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SITE",
         help=f"with --task: start with the closed jaws on this site (rehearse register): {', '.join(PLACEABLE_SITES)}",
     )
+    parser.add_argument(
+        "--stamp-fault",
+        choices=tuple(STAMP_FAULTS),
+        default=None,
+        help="inject a clock fault on measured_js (from --stamp-fault-after or SIGUSR1 on): "
+        + "; ".join(f"{name}: {what}" for name, what in STAMP_FAULTS.items()),
+    )
+    parser.add_argument(
+        "--stamp-fault-after",
+        type=int_in(1, 10**9),
+        default=None,
+        metavar="N",
+        help="with --stamp-fault: start it after the N-th accepted servo_jp (default: only on SIGUSR1)",
+    )
     add_live_argument(parser)
 
 
@@ -134,6 +154,8 @@ def run(args: argparse.Namespace) -> int:
             True,
             "with --task ID (they are about a task's scene)",
         )
+    if args.stamp_fault_after is not None and args.stamp_fault is None:
+        raise ConfigurationError("--stamp-fault-after", args.stamp_fault_after, "with --stamp-fault MODE")
     truth_path = check_output_path(args.truth, "--truth") if args.truth else None
     require_ros()
     # The ros extra, imported after the environment it reads is set.
@@ -161,6 +183,11 @@ def run(args: argparse.Namespace) -> int:
     for sig in _STOP_SIGNALS:
         signal.signal(sig, signal.default_int_handler)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+    stamp_fault = None
+    if args.stamp_fault is not None:
+        fault = stamp_fault = StampFault(args.stamp_fault, args.stamp_fault_after)
+        signal.signal(signal.SIGUSR1, lambda _signal, _frame: fault.start("SIGUSR1"))
+        print(f"stamp fault on measured_js: {fault.describe()}", flush=True)
     with live_view as live, ros_session(signal_handlers=False):
         node: SimulatedPsm | None = None
         truth: TruthLog | None = None
@@ -182,6 +209,7 @@ def run(args: argparse.Namespace) -> int:
                 scene=scene,
                 sensor=ForceSensor(sensing_params(args.wrench), np.random.default_rng(args.seed)),
                 exclusive=True,
+                stamp_fault=stamp_fault,
             )
             if task is not None and args.place_jaws_on is not None:
                 node.place_arm(task.jaws_on(args.place_jaws_on), 0.0)
