@@ -16,8 +16,17 @@ project imports them from the modules that define them.
 """
 
 from hardware_if.deploy.options import DeployOptions
-from hardware_if.deploy.report import EXIT_HOLD, DeployReport
+from hardware_if.deploy.report import EXIT_FORCE_LIMIT, EXIT_HOLD, DeployReport
 from hardware_if.deploy.run import deploy
 from hardware_if.deploy.stopping import EXIT_INTERRUPTED, STOP_SIGNALS, Interrupted
 
-__all__ = ["EXIT_HOLD", "EXIT_INTERRUPTED", "STOP_SIGNALS", "DeployOptions", "DeployReport", "Interrupted", "deploy"]
+__all__ = [
+    "EXIT_FORCE_LIMIT",
+    "EXIT_HOLD",
+    "EXIT_INTERRUPTED",
+    "STOP_SIGNALS",
+    "DeployOptions",
+    "DeployReport",
+    "Interrupted",
+    "deploy",
+]

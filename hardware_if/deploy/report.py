@@ -26,6 +26,7 @@ from safety.force_watch import FORCE_LIMIT_STALL
 from sim.success_interval import describe_success
 
 __all__ = [
+    "EXIT_FORCE_LIMIT",
     "EXIT_HOLD",
     "DeployReport",
     "account",
@@ -38,6 +39,10 @@ __all__ = [
 
 #: Exit status of a deploy that stopped because the deadman held the arm.
 EXIT_HOLD = 4
+#: Exit status of a deploy in which the force on the tissue certainly exceeded the limit: the true force in the
+#: simulation, a measured force beyond the limit plus the sensing's error bound on a dVRK. It comes before a
+#: hold's and a stop signal's: a run that did both ends with it (the report says both).
+EXIT_FORCE_LIMIT = 3
 
 
 @dataclass
@@ -67,7 +72,10 @@ class DeployReport:
 
     @property
     def exit_code(self) -> int:
-        """0 when every episode ran to its end, :data:`EXIT_HOLD` on a hold, 128 + signal on a stop signal."""
+        """:data:`EXIT_FORCE_LIMIT` when the force limit was certainly exceeded, else 128 + signal on a stop
+        signal, :data:`EXIT_HOLD` on a hold, 0 when every episode ran to its end."""
+        if self.force_limit_exceeded:
+            return EXIT_FORCE_LIMIT
         if self.interrupted:
             return 128 + int(signal.Signals[self.signal or "SIGINT"])
         return EXIT_HOLD if self.fault else 0
@@ -110,7 +118,8 @@ class DeployReport:
         if self.force_limit_exceeded:
             out.append(
                 f"  FORCE LIMIT {self.force_limit_n:g} N EXCEEDED{told} {self.force_limit_exceeded} x, "
-                f"{self.force_over_limit_s:.2f} s in all (events force_limit_exceeded in the recording)"
+                f"{self.force_over_limit_s:.2f} s in all (events force_limit_exceeded in the recording; "
+                f"exit status {EXIT_FORCE_LIMIT})"
             )
         elif self.episodes:
             out.append(f"  force limit {self.force_limit_n:g} N: never exceeded{told}")

@@ -16,16 +16,19 @@ pull the grasped tool from where it is).
 One fault path, the same for the simulation, the dVRK and a dry run: a policy that raises (anything,
 ``SystemExit`` included) or returns something other than 5 finite numbers, a policy step slower than its
 budget (default one policy period), malformed or non-finite data on any subscribed topic, an arm not
-ENABLED, homed and idle when an episode starts (waited for up to ``wait_s``), a stale or vanished arm, a
-tracking error (the deadman, :mod:`hardware_if.client.deadman`), another commander or console of the arm
+ENABLED, homed and idle when an episode starts (waited for up to ``wait_s``), a stale or vanished arm (a
+``measured_js`` whose stamp stopped advancing, went back or jumped included), a tracking error (the
+deadman, :mod:`hardware_if.client.deadman`), the chain's own deadman, another commander or console of the arm
 (:mod:`hardware_if.common.commander_watch`, checked before anything reaches a console and while it runs), an arm
 not at the episode's start in a dry run or after the move back, a tracking divergence
 (:mod:`hardware_if.client.arm_pose`), a recording that cannot be written (:mod:`hardware_if.recording.checked_file`), or
 any other error while the arm is commanded all end the same way: nothing new is commanded (the arm keeps
 the last verified command), the fault is recorded as a ``hold`` event with its reason and data, the report
 says ``HOLD: <reason>`` and the exit status is :data:`EXIT_HOLD`. SIGINT, SIGTERM and SIGHUP stop between
-two control ticks, close the recording and exit with 128 + the signal number (130, 143, 129). Every run is
-recorded (:mod:`hardware_if.recording.recorder`).
+two control ticks, close the recording and exit with 128 + the signal number (130, 143, 129). A run in
+which the force certainly exceeded the limit (the true force in the simulation; on a dVRK, the measured
+force beyond the limit plus the sensing's error bound) exits with :data:`EXIT_FORCE_LIMIT`, whatever else
+happened. Every run is recorded (:mod:`hardware_if.recording.recorder`).
 """
 
 import contextlib

@@ -29,10 +29,13 @@ jaw/move_jp. It ends with a report: commands it would have sent, safety interven
 Every fault ends in the same hold: the policy raising or returning anything but 5 finite numbers, a policy
 step slower than ``--policy-budget`` (default one policy period, 0.05 s), malformed or non-finite data on
 a subscribed topic, an arm not ENABLED, homed and idle when an episode starts (waited for up to
-``--wait``), a stale or vanished arm, a tracking error. Deploy then stops commanding (the arm keeps the
-last verified command), records the fault, prints ``HOLD: <reason>`` and exits with status 4.
+``--wait``), a stale or vanished arm (a ``measured_js`` whose stamp stops advancing, goes back or jumps
+included), a tracking error. Deploy then stops commanding (the arm keeps the last verified command), records
+the fault, prints ``HOLD: <reason>`` and exits with status 4.
 Ctrl-C (SIGINT), SIGTERM and SIGHUP stop between two control ticks and close the recording; the exit
-status is 128 + the signal: 130, 143, 129.
+status is 128 + the signal: 130, 143, 129. A run in which the force certainly exceeded the limit (``FORCE
+LIMIT ... EXCEEDED``: the true force in the simulation, the measured force beyond the limit plus the
+sensing's error bound on a dVRK) exits with status 3, whatever else happened.
 Every run is recorded to MCAP (``--record``, default ``runs/deploy-<time>.mcap``; see ``replay``; an existing
 recording is kept: the run is refused unless ``--force`` replaces it), with its
 3-D scene in Foxglove's schemas: the measured arm, the commanded arm (translucent blue; in a dry run, where
@@ -187,7 +190,8 @@ def _default_record() -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Deploy, print the report, return 0, 4 (hold) or 128 + the stop signal (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP)."""
+    """Deploy, print the report, return 0, 3 (force limit certainly exceeded), 4 (hold) or 128 + the stop signal
+    (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP)."""
     if args.network and args.dry_run:
         raise ConfigurationError("--network", True, "not with --dry-run: dry runs stay on localhost")
     if args.target == "dvrk":
