@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import collections
 import math
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -14,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from hardware_if.common.crtk import JOINT_NAMES
-from hardware_if.recording.recorder import read_recording
-from psm_control.errors import ConfigurationError
+from hardware_if.recording.reader import RecordingFileError
+from hardware_if.recording.schema import RecordingMessages, as_float
 from safety.force_watch import FORCE_LIMIT_EXCEEDED, FORCE_LIMIT_STALL
 
 __all__ = ["TICK_GAP_S", "Recording", "RecordingSummary", "answers", "load_recording", "summarize_recording"]
@@ -118,66 +119,66 @@ def _newtons(value: Any) -> str:
     return f"{float(value):.3f} N"
 
 
-def _number(payload: dict[str, Any], key: str) -> float:
-    """A number of a message, nan when it is missing (older recordings) or null (non-finite when written)."""
-    value = payload.get(key)
-    return float(value) if value is not None else float("nan")
-
-
 def load_recording(path: str | Path) -> Recording:
-    """Read a recording into arrays.
+    """Read a recording into arrays, its messages checked as they are read (:mod:`hardware_if.recording.schema`).
 
     Raises:
-        ConfigurationError: The file is missing or not a deploy recording.
+        RecordingFileError: The file is missing, not a recording within the reader's limits
+            (:mod:`hardware_if.recording.reader`), or a message is not what its channel holds (named).
     """
-    if not Path(path).is_file():
-        raise ConfigurationError("recording", str(path), "an existing .mcap file written by deploy")
+    messages = RecordingMessages(path)
     rec = Recording()
-    rows: dict[str, list[Any]] = collections.defaultdict(list)
-    try:
-        read = read_recording(path)
-        messages = read.messages
-        rec.truncated = read.truncated
-    except Exception as e:
-        raise ConfigurationError("recording", str(path), "an MCAP file written by tissue-retract deploy") from e
-    if not messages:
-        raise ConfigurationError("recording", str(path), "a recording with messages")
-    start = messages[0][1]
-    for topic, t, payload in messages:
+    times: dict[str, list[int]] = collections.defaultdict(list)  # log times [ns] per channel
+    floats: dict[str, array] = collections.defaultdict(lambda: array("d"))
+    flags: dict[str, list[bool]] = collections.defaultdict(list)
+    events: list[dict[str, Any]] = []
+    start: int | None = None  # the first log time [ns]
+    for topic, _, t_ns, payload in messages:
+        start = t_ns if start is None else min(start, t_ns)
         if topic == "/deploy/meta":
             rec.meta = payload
         elif topic == "/deploy/report":
             rec.report = payload
         elif topic == "/deploy/event":
-            rec.events.append({"t": t - start, **payload})
+            events.append({**payload, "t": t_ns})
         elif topic == "/deploy/measured":
-            rows["mt"].append(t - start)
-            rows["mq"].append(payload["q"])
-            rows["f"].append(payload["force_n"])
-            rows["ms"].append(_number(payload, "stamp_s"))
-            rows["mj"].append(_number(payload, "jaw"))
+            times["measured"].append(t_ns)
+            floats["mq"].extend(as_float(v) for v in payload["q"])
+            floats["f"].extend(as_float(v) for v in payload["force_n"])
+            floats["ms"].append(as_float(payload.get("stamp_s")))
+            floats["mj"].append(as_float(payload.get("jaw")))
         elif topic == "/deploy/command":
-            rows["ct"].append(t - start)
-            rows["cq"].append(payload["q"])
-            rows["sent"].append(bool(payload["sent"]))
-            rows["stop"].append(bool(payload["safety_stop"]))
-            rows["cs"].append(_number(payload, "stamp_s"))
-            rows["cj"].append(_number(payload, "jaw"))
-            rows["int"].append(bool(payload.get("interventions")))
-            predicted = payload.get("predicted_force_n")
-            rows["pf"].append(np.nan if predicted is None else float(predicted))
+            times["command"].append(t_ns)
+            floats["cq"].extend(as_float(v) for v in payload["q"])
+            flags["sent"].append(payload["sent"])
+            flags["stop"].append(payload["safety_stop"])
+            floats["cs"].append(as_float(payload.get("stamp_s")))
+            floats["cj"].append(as_float(payload.get("jaw")))
+            flags["int"].append(bool(payload.get("interventions")))
+            floats["pf"].append(as_float(payload.get("predicted_force_n")))
         elif topic == "/deploy/action":
             rec.actions += 1
-    if rows["mt"]:
-        rec.measured_t, rec.measured_q = np.array(rows["mt"]), np.array(rows["mq"], dtype=float)
-        rec.force_n = np.array(rows["f"], dtype=float)
-        rec.measured_stamp_s, rec.measured_jaw = np.array(rows["ms"]), np.array(rows["mj"])
-    if rows["ct"]:
-        rec.command_t, rec.command_q = np.array(rows["ct"]), np.array(rows["cq"], dtype=float)
-        rec.command_sent, rec.safety_stop = np.array(rows["sent"]), np.array(rows["stop"])
-        rec.predicted_force_n = np.array(rows["pf"], dtype=float)
-        rec.command_stamp_s, rec.command_jaw = np.array(rows["cs"]), np.array(rows["cj"])
-        rec.intervened = np.array(rows["int"], dtype=bool)
+    rec.truncated = messages.truncated
+    if start is None:
+        raise RecordingFileError(
+            path, "a recording written by tissue-retract deploy, with messages on /deploy/* channels; it has none"
+        )
+    # In log-time order, as the writer logged them (a chunk's messages are in order; a clock step is not).
+    rec.events = sorted(({**e, "t": 1e-9 * (e["t"] - start)} for e in events), key=lambda e: e["t"])
+    if times["measured"]:
+        order = np.argsort(times["measured"], kind="stable")
+        rec.measured_t = 1e-9 * (np.array(times["measured"])[order] - start)
+        rec.measured_q = np.frombuffer(floats["mq"]).reshape(-1, 6)[order]
+        rec.force_n = np.frombuffer(floats["f"]).reshape(-1, 3)[order]
+        rec.measured_stamp_s, rec.measured_jaw = np.frombuffer(floats["ms"])[order], np.frombuffer(floats["mj"])[order]
+    if times["command"]:
+        order = np.argsort(times["command"], kind="stable")
+        rec.command_t = 1e-9 * (np.array(times["command"])[order] - start)
+        rec.command_q = np.frombuffer(floats["cq"]).reshape(-1, 6)[order]
+        rec.command_sent, rec.safety_stop = np.array(flags["sent"])[order], np.array(flags["stop"])[order]
+        rec.predicted_force_n = np.frombuffer(floats["pf"])[order]
+        rec.command_stamp_s, rec.command_jaw = np.frombuffer(floats["cs"])[order], np.frombuffer(floats["cj"])[order]
+        rec.intervened = np.array(flags["int"], dtype=bool)[order]
     return rec
 
 

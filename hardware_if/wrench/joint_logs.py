@@ -203,6 +203,12 @@ def _read_bag(path: Path, arm: str) -> JointLog:
     from rosbags.rosbag2 import Reader  # rosbags, a package dependency: imported where a bag is read
     from rosbags.typesys import Stores, get_typestore
 
+    from hardware_if.wrench.bag_files import check_bag_files  # rosbags decompresses without bounds: checked first
+
+    try:
+        check_bag_files(path, field="--from")
+    except InputFileError as e:
+        raise LogLayoutError(path, e.allowed) from e
     topic = f"/{arm}/measured_js"
     typestore = get_typestore(Stores.ROS2_JAZZY)
     times: list[float] = []
@@ -267,25 +273,44 @@ def joint_log_from_ticks(
 
 
 def _read_recording(path: Path) -> JointLog:
-    from hardware_if.recording.recorder import read_recording  # mcap: the deploy's own recording format
+    """A deploy recording's ``/deploy/measured`` ticks, read and checked within the recordings' limits."""
+    from array import array
 
-    rows = [payload for topic, _, payload in read_recording(path) if topic == "/deploy/measured"]
-    if not rows:
-        raise MissingTopicError(path, "a recording with /deploy/measured messages")
-    if any("effort" not in row for row in rows):
-        raise NoEffortsError(path, "measurements with efforts ('effort' in /deploy/measured); this recording has none")
-    ticks = [(float(row["stamp_s"]), row["q"], row["qd"], row["effort"]) for row in rows]
+    from hardware_if.recording.schema import RecordingMessages, as_float  # mcap: the deploy's own format
+
+    topic = "/deploy/measured"
+    log_times, values = array("q"), array("d")  # per tick: stamp, q, qd, effort (19 numbers)
+    try:
+        for _, index, log_time_ns, row in RecordingMessages(path, [topic], field="--from"):
+            if "effort" not in row:
+                raise NoEffortsError(
+                    path, f"measurements with efforts ('effort' in {topic}); message {index} of this recording has none"
+                )
+            for key in ("stamp_s", "qd"):
+                if row.get(key) is None:
+                    raise LogLayoutError(path, f"{topic} message {index}: {key} must be given; it is {row.get(key)}")
+            log_times.append(log_time_ns)
+            values.append(as_float(row["stamp_s"]))
+            for key in ("q", "qd", "effort"):
+                values.extend(as_float(v) for v in row[key])
+    except InputFileError as e:
+        if isinstance(e, JointLogError):
+            raise
+        raise LogLayoutError(path, e.allowed) from e
+    if not log_times:
+        raise MissingTopicError(path, f"a recording with {topic} messages")
+    table = np.frombuffer(values).reshape(-1, 19)[np.argsort(log_times, kind="stable")]  # in log-time order
+    ticks = [(float(row[0]), row[1:7], row[7:13], row[13:19]) for row in table]
     return _checked(joint_log_from_ticks(str(path), "recording", ticks))
 
 
 def _is_recording(path: Path) -> bool:
     """An MCAP file written by this project's deploy (its library), not by ``ros2 bag`` (profile ``ros2``)."""
-    from mcap.reader import make_reader  # mcap: the recordings' own format
+    from hardware_if.recording.reader import RecordingFileError, read_header  # mcap: the recordings' own format
 
     try:
-        with path.open("rb") as f:
-            header = make_reader(f).get_header()
-    except Exception:  # not a readable MCAP header: the bag reader then names what is wrong
+        header = read_header(path, field="--from")
+    except RecordingFileError:  # not a readable MCAP header: the bag reader then names what is wrong
         return False
     return header.library == "tissue-retract"
 
