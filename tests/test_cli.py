@@ -21,6 +21,18 @@ def test_help_lists_every_subcommand() -> None:
     for name in PROMISED:
         assert name in SUBCOMMANDS
         assert name in result.stdout
+    listed = " ".join(result.stdout.split())  # argparse folds the help line
+    assert all(target in listed for target in TARGETS), listed
+
+
+def test_safety_show_takes_the_safety_config_option_every_command_takes(tmp_path) -> None:
+    """``safety show --safety-config F`` shows F's limits (``--config`` is still taken)."""
+    config = tmp_path / "limits.toml"
+    config.write_text("force_limit_n = 1.5\n")
+    for option in ("--safety-config", "--config"):
+        result = run_cli("safety", "show", option, str(config))
+        assert result.returncode == 0, result.stderr
+        assert "force_limit_n" in result.stdout and "1.5 (explicit)" in result.stdout, result.stdout
 
 
 def test_version() -> None:

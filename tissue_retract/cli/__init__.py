@@ -24,6 +24,7 @@ from collections.abc import Callable, Mapping, Sequence
 from psm_control import __version__
 from psm_control.errors import TissueRetractError
 from tissue_retract.cli._help_text import plain_description
+from tissue_retract.cli.bench import TARGETS as BENCH_TARGETS
 
 __all__ = ["SUBCOMMANDS", "add_commands", "build_parser", "main"]
 
@@ -43,7 +44,7 @@ SUBCOMMANDS: dict[str, str] = {
     "register": "register the grasp site by holding the jaws on it (for deploy --site)",
     "sim-dvrk": "serve the dVRK's CRTK topics from the simulation",
     "replay": "summarise and plot a recorded run",
-    "bench": "measure speed (env, chain, ros, train) and run the fault matrix (faults)",
+    "bench": "measurements that print numbers: " + ", ".join(BENCH_TARGETS),
     "safety": "show the effective safety limits",
 }
 

@@ -1,4 +1,4 @@
-"""``tissue-retract safety show [--config FILE]``: print the effective safety limits."""
+"""``tissue-retract safety show [--safety-config FILE]``: print the effective safety limits."""
 
 from __future__ import annotations
 
@@ -23,7 +23,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the subcommand to its parser."""
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     show = actions.add_parser("show", help="print the effective limits as a table")
-    show.add_argument("--config", metavar="FILE", default=None, help="a TOML or YAML safety configuration")
+    show.add_argument(
+        "--safety-config",
+        "--config",  # the older name, still taken
+        dest="config",
+        metavar="FILE",
+        default=None,
+        help="a TOML or YAML safety configuration, as every other command's --safety-config",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
