@@ -91,11 +91,34 @@ SENSING_PARAMETERS = frozenset({"force_sensing_scale"})
 #: Encoder offset of the insertion joint per unit of ``joint_offset_rad`` [m/rad].
 INSERTION_M_PER_RAD = 0.01
 
-#: Allowed values of bounded parameters: (minimum, maximum, maximum included).
+#: Allowed values of every parameter: (minimum, maximum, maximum included). Physical bounds, wide enough for
+#: any sweep of a soft-tissue flap on the PSM, narrow enough that every episode stays a meaningful one
+#: (docs/robustness.md lists the reasons): a latency beyond an episode's steps never applies an action, an
+#: observation noise of centimetres hides the flap, a 1e9-step latency once filled memory.
 PARAMETER_LIMITS: dict[str, tuple[float, float, bool]] = {
-    "joint_offset_rad": (0.0, np.inf, True),
-    "base_error_m": (0.0, np.inf, True),
+    "tissue_youngs_modulus_kpa": (0.1, 1000.0, True),  # brain to skin and tendon
+    "tissue_damping": (0.0, 1.0, True),
+    "tissue_density_kg_m3": (500.0, 2000.0, True),  # fat to bone
+    "tissue_size_m": (0.06, 0.16, True),  # the three sites, offset as below, stay on the flap
+    "tissue_color_r": (0.0, 1.0, True),
+    "tissue_color_g": (0.0, 1.0, True),
+    "tissue_color_b": (0.0, 1.0, True),
+    "tissue_texture_seed": (0.0, 2**31 - 1, True),
+    "tissue_x_m": (-0.05, 0.05, True),
+    "tissue_y_m": (-0.05, 0.05, True),
+    "site_offset_x_m": (-0.003, 0.003, True),
+    "site_offset_y_m": (-0.003, 0.003, True),
+    "gravity_m_s2": (0.0, 20.0, True),
+    "grip_friction": (0.0, 2.0, True),
+    "rcm_x_m": (-0.05, 0.05, True),
+    "rcm_y_m": (-0.05, 0.05, True),
+    "rcm_z_m": (-0.03, 0.03, True),
+    "observation_noise_m": (0.0, 0.01, True),  # 1 cm: near half the flap's site spacing (22 mm)
+    "action_latency_steps": (0.0, 50.0, True),  # an episode's steps (sim.envs.MAX_EPISODE_STEPS)
+    "joint_offset_rad": (0.0, 0.2, True),
+    "base_error_m": (0.0, 0.05, True),
     "tracking_lag": (0.0, 1.0, False),
+    "tissue_thickness_mm": (0.5, 20.0, True),
     "force_sensing_scale": (0.0, 100.0, True),
 }
 

@@ -15,13 +15,16 @@ from typing import NamedTuple
 
 from psm_control.errors import ConfigurationError
 from sim.disturbances import Disturbance
-from sim.randomization import DEFAULT_RANGES, INTEGER_PARAMETERS
+from sim.randomization import DEFAULT_RANGES, INTEGER_PARAMETERS, PARAMETER_LIMITS
 from sim.sweep.space import ParameterRange, parse_ranges
 
 __all__ = [
     "ALIASES",
+    "DISTURBANCE_LIMITS",
     "DISTURBANCE_PARAMETERS",
     "TrainingRanges",
+    "allowed_range",
+    "check_limits",
     "check_relative_ranges",
     "disturbances",
     "episode_options",
@@ -74,6 +77,18 @@ DISTURBANCE_PARAMETERS: dict[str, str] = {
     "action_white": "white noise on the action, standard deviation [action units]",
     "action_impulse": "impulse on the action for 3 steps from step 10 [action units]",
     "action_step": "step offset on the action from step 10 [action units]",
+}
+
+#: Allowed magnitudes of the disturbances (standard deviations, offsets' norms): the observation is positions
+#: in metres, and 5 cm is farther than the flap's sites are from each other; the action is normalised to
+#: [-1, 1], and an offset of 2 already takes any action across it.
+DISTURBANCE_LIMITS: dict[str, tuple[float, float]] = {
+    "obs_white_m": (0.0, 0.05),
+    "obs_impulse_m": (0.0, 0.05),
+    "obs_step_m": (0.0, 0.05),
+    "action_white": (0.0, 2.0),
+    "action_impulse": (0.0, 2.0),
+    "action_step": (0.0, 2.0),
 }
 
 _IMPULSE_START, _IMPULSE_STEPS = 10, 3
@@ -132,9 +147,38 @@ def check_relative_ranges(ranges: Iterable[ParameterRange]) -> None:
             raise ConfigurationError(f"vary.{r.name}", r.describe(), "a range of magnitudes >= 0")
 
 
+def allowed_range(name: str) -> tuple[float, float, bool]:
+    """The values a sweep parameter may take, in its unit: ``(minimum, maximum, maximum included)``."""
+    if name in DISTURBANCE_LIMITS:
+        return (*DISTURBANCE_LIMITS[name], True)
+    return PARAMETER_LIMITS[ALIASES.get(name, name)]
+
+
+def check_limits(ranges: Iterable[ParameterRange]) -> None:
+    """Refuse a range that reaches outside its parameter's allowed values (:func:`allowed_range`); a multiple
+    of nominal is checked as the value it stands for.
+
+    Raises:
+        ConfigurationError: Naming the parameter, the allowed values and their unit (and, for a multiple,
+            the multiples they allow).
+    """
+    labels = parameter_unit_labels()
+    for r in ranges:
+        low, high, closed = allowed_range(r.name)
+        scale = nominal(r.name) if r.relative else 1.0
+        if all(low <= v * scale and (v * scale <= high if closed else v * scale < high) for v in (r.low, r.high)):
+            continue
+        unit = f" {labels[r.name]}" if r.name in labels else ""
+        allowed = f"values within [{low:.10g}, {high:.10g}{']' if closed else ')'}{unit}"
+        if r.relative:
+            allowed += f": multiples {low / scale:.4g}-{high / scale:.4g}x of its nominal {scale:.4g}{unit}"
+        raise ConfigurationError(f"vary.{r.name}", r.describe(), allowed)
+
+
 def parse_vary(text: str) -> tuple[ParameterRange, ...]:
     """``--vary`` as ``robustness`` and ``train`` both take it: the names of :func:`sweep_parameters`, their
-    units, whole numbers for :func:`integer_parameters`, and the checks of :func:`check_relative_ranges`.
+    units, whole numbers for :func:`integer_parameters`, and the checks of :func:`check_relative_ranges` and
+    :func:`check_limits`.
 
     Raises:
         UnknownVariantError: A name that is no sweep parameter (the valid ones are listed).
@@ -148,6 +192,7 @@ def parse_vary(text: str) -> tuple[ParameterRange, ...]:
         unit_labels=parameter_unit_labels(),
     )
     check_relative_ranges(ranges)
+    check_limits(ranges)
     return ranges
 
 

@@ -334,6 +334,37 @@ def _cases(tmp: Path) -> list[Case]:
             ("robustness", "--policy", "scripted", *SWEEP[:2], "--vary", "stiffness=1", "--jobs", "0"),
             ("--jobs", "0"),
         ),
+        # Every --vary parameter has an allowed range (a 1e9-step latency filled memory in every episode).
+        Case(
+            "vary-latency-1e9",
+            ("robustness", "--policy", "scripted", *SWEEP, "--vary", "latency=0:1e9", "--out", str(tmp / "v1")),
+            ("vary.latency", "[0, 50] policy steps"),
+            (tmp / "v1",),
+        ),
+        Case(
+            "vary-obs-noise-1e308",
+            ("robustness", "--policy", "scripted", *SWEEP, "--vary", "obs_noise=0:1e308", "--out", str(tmp / "v2")),
+            ("vary.obs_noise", "[0, 0.01] m"),
+            (tmp / "v2",),
+        ),
+        Case(
+            "vary-stiffness-multiple",
+            ("robustness", "--policy", "scripted", *SWEEP, "--vary", "stiffness=1:1e6x", "--out", str(tmp / "v3")),
+            ("vary.stiffness", "[0.1, 1000] kPa", "multiples 0.01-100x"),
+            (tmp / "v3",),
+        ),
+        Case(
+            "vary-action-white-1e9",
+            ("robustness", "--policy", "scripted", *SWEEP, "--vary", "action_white=0:1e9", "--out", str(tmp / "v4")),
+            ("vary.action_white", "[0, 2] action units"),
+            (tmp / "v4",),
+        ),
+        Case(
+            "vary-train-latency",
+            (*TOY_TRAIN, "--out", str(tmp / "v5"), *TOY_TRAIN_TAIL, "--vary", "latency=0:1e9"),
+            ("vary.latency", "[0, 50]"),
+            (tmp / "v5",),
+        ),
     ]
     cases.append(
         Case(
@@ -499,7 +530,18 @@ def _run(case: Case) -> Case:
 #: The matrix in groups of about a dozen commands (by the case's name), so that pytest-xdist spreads them.
 GROUPS = {
     "configs": ("config-",),
-    "command-values": ("seeds-", "seed-", "episodes-", "deploy-", "trials-", "tune-", "json-", "record-", "jobs-"),
+    "command-values": (
+        "seeds-",
+        "seed-",
+        "episodes-",
+        "deploy-",
+        "trials-",
+        "tune-",
+        "json-",
+        "record-",
+        "jobs-",
+        "vary-",
+    ),
     "reproduce-bench-simdvrk": ("reproduce-", "bench-", "simdvrk-"),
     "demonstrations": ("demos-", "train-"),
     "checkpoints-and-policies": ("checkpoint-", "policy-"),

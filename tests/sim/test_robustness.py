@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
 from psm_control.errors import ConfigurationError
-from sim.randomization import DEFAULT_RANGES, Randomizer
-from sim.robustness import parse_vary, training_ranges
+from sim.randomization import DEFAULT_RANGES, INTEGER_PARAMETERS, Randomizer
+from sim.robustness import ALIASES, parse_vary, training_ranges
 from sim.sweep import make_trials
 from tests.sim.conftest import make_env
 
@@ -72,3 +74,25 @@ def test_random_actions_at_randomization_extremes() -> None:
     finally:
         env.close()
     assert unstable == 0
+
+
+def test_every_sweep_parameter_has_an_allowed_range_holding_its_default() -> None:
+    """Each --vary name has a stated allowed range around its default range; one end outside it is refused
+    by name with the range, and an episode's value outside it is refused by the simulation too."""
+    from sim.envs import MAX_EPISODE_STEPS
+    from sim.robustness import allowed_range, nominal, sweep_parameters
+
+    for name in sweep_parameters():
+        low, high, _ = allowed_range(name)
+        full = ALIASES.get(name, name)
+        if full in DEFAULT_RANGES:
+            assert low <= DEFAULT_RANGES[full][0] <= DEFAULT_RANGES[full][1] <= high, name
+        if full not in INTEGER_PARAMETERS and (full not in DEFAULT_RANGES or nominal(full) == 0.0):
+            parse_vary(f"{name}={low:g}:{low:g}")  # the allowed end itself is accepted
+        with pytest.raises(
+            ConfigurationError, match=re.escape(f"vary.{name}=") + ".*" + re.escape(f"[{low:.10g}, {high:.10g}")
+        ):
+            parse_vary(f"{name}={low:g}:{2 * high + 1:g}")
+    assert allowed_range("latency")[1] == MAX_EPISODE_STEPS  # a later action is never applied
+    with pytest.raises(ConfigurationError, match="observation_noise_m"):
+        Randomizer().sample(np.random.default_rng(0), {"observation_noise_m": 1e308})
