@@ -11,8 +11,9 @@ import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from psm_control.errors import ConfigurationError
+from psm_control.errors import ConfigurationError, OutputFileError
 from psm_control.inputs import check_output_path
+from psm_control.outputs import special_file_kind
 
 __all__ = ["MAX_EPISODES", "MAX_SEED", "MAX_TRIALS", "check_out_folder", "float_in", "int_in", "output_file"]
 
@@ -72,22 +73,32 @@ def output_file(field: str) -> Callable[[str], Path]:
 
 
 def check_out_folder(
-    out: Path, outputs: Iterable[str], inputs: Iterable[str | Path | None], field: str = "--out"
+    out: Path, outputs: Iterable[str], inputs: Iterable[str | Path | None], field: str = "--out", make: bool = True
 ) -> None:
     """Make an output folder, refusing a file, an unwritable folder, or one where an output replaces an input.
+
+    A device, a FIFO, a socket (or a symlink to one) is refused as the folder and as any of its ``outputs``;
+    ``make=False`` checks without making the folder (for a command with two folders to check first).
 
     Raises:
         ConfigurationError: Naming ``field`` (the option) and what is wrong (the input it would overwrite).
     """
-    if out.exists() and not out.is_dir():
-        raise ConfigurationError(field, str(out), "a folder (this is a file)")
+    kind = special_file_kind(out)
+    if kind != "folder" and (kind is not None or out.exists()):
+        raise OutputFileError(field, str(out), f"a folder (this is a {kind or 'file'})")
     names = set(outputs)
+    for name in sorted(names):
+        inside = special_file_kind(out / name)
+        if inside is not None:
+            raise OutputFileError(field, str(out), f"a folder whose {name} is a regular file or new (it is a {inside})")
     for given in inputs:
         if given is None or not Path(given).is_file():
             continue
         source = Path(given).resolve()
         if source.parent == out.resolve() and (source.name in names or source.suffix == ".png"):
             raise ConfigurationError(field, str(out), f"a folder whose outputs do not replace the input {str(given)!r}")
+    if not make:
+        return
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -18,6 +18,7 @@ from typing import Any
 
 from psm_control.outputs import write_atomic
 from sim.strict_json import write_strict_json
+from tissue_retract.cli._checks import check_out_folder
 from tissue_retract.cli._ros import add_bench_domain_argument, bench_domain_id
 
 __all__ = ["add_arguments", "run"]
@@ -38,6 +39,8 @@ def run(args: argparse.Namespace) -> int:
     from tissue_retract.faults import FAULTS, run_fault, scratch_dir
 
     faults = [f for f in FAULTS if args.only is None or args.only in f.name]
+    if args.keep:
+        check_out_folder(Path(args.keep), (), (), "--keep")
     root = Path(args.keep) if args.keep else scratch_dir()
     rows: list[dict[str, Any]] = []
     width = max(len(f.name) for f in faults) if faults else 5

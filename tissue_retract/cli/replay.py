@@ -13,6 +13,7 @@ import argparse
 
 from hardware_if.recording.replay import load_recording, summarize_recording
 from hardware_if.recording.replay_figure import plot_recording
+from psm_control.inputs import check_output_path
 
 __all__ = ["add_arguments", "run"]
 
@@ -30,6 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the summary and write the plot."""
+    if args.plot:
+        check_output_path(args.plot, "--plot", (args.file,))
     recording = load_recording(args.file)
     for line in summarize_recording(recording).lines():
         print(line)

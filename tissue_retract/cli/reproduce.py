@@ -65,8 +65,9 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(flag, args.tasks if not tasks else args.algos, f"one or more of {allowed}")
     seeds = list(dict.fromkeys(args.seeds))  # one folder per seed: a repeated seed would train it twice at once
     runs_dir = args.runs if args.runs is not None else args.out / "runs"
-    check_out_folder(args.out, (), ())
-    check_out_folder(runs_dir, (), (), field="--runs")
+    for make in (False, True):  # both checked before either is made
+        check_out_folder(args.out, (), (), make=make)
+        check_out_folder(runs_dir, (), (), field="--runs", make=make)
     runs = plan(
         runs_dir,
         episodes=args.budget,
