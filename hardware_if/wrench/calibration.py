@@ -25,13 +25,17 @@ from psm_control.robot import PsmConfiguration
 from safety.config import SafetyConfig
 from sim.force_sensing import console_force
 
-__all__ = ["EXACT_SENSING", "MAX_FILE_BYTES", "WrenchCalibration", "read_calibration"]
+__all__ = ["EXACT_SENSING", "MAX_FILE_BYTES", "MIN_BOUND_N", "WrenchCalibration", "read_calibration"]
 
 #: Largest calibration file read [bytes] (1 MiB): one holds a few hundred numbers, a few kilobytes.
 MAX_FILE_BYTES = 1024 * 1024
 #: ``sensing`` of a calibration fitted where the console's free-space efforts were all zero: a console that
 #: reports the exact force (``sim-dvrk --wrench ideal``), or one that sends no efforts.
 EXACT_SENSING = "ideal"
+#: Smallest error bound a calibration may have [N]: no fit of a real PSM's motor currents is exact. The least any
+#: calibration left on a public PSM log held out is 1.72 N at most (radiang's three-joint logs, 0.38 N RMS), and a
+#: dedicated 3-axis tip sensor's RMS error is 0.15 N; a bound below this says a log showed no sensor at all.
+MIN_BOUND_N = 0.5
 
 
 @dataclass(frozen=True)
@@ -55,6 +59,11 @@ class WrenchCalibration:
             console whose free-space efforts were all zero: one that reports the exact force, as
             ``sim-dvrk --wrench ideal`` does, or sends no efforts), or ``logs: <layouts>`` (offline).
         console: The console of the arm it was fitted on: ``sim-dvrk``, ``dvrk`` or ``unknown``.
+        max_after_retraction_speed_n: The largest held-out error (the acceleration known) at retraction speeds,
+            which ``error_bound_with_acceleration_n`` covers [N]; None in files of earlier versions.
+        max_after_without_acceleration_n: The largest held-out error without the acceleration in the regime
+            ``error_bound_n`` covers (retraction speeds, accelerations within the chain's limits) [N]; None in
+            files of earlier versions or when the held-out log had no sample there.
     """
 
     arm: str
@@ -69,6 +78,8 @@ class WrenchCalibration:
     samples: int
     sensing: str = "measured_js"
     console: str = "unknown"
+    max_after_retraction_speed_n: float | None = None
+    max_after_without_acceleration_n: float | None = None
 
     @property
     def origin(self) -> str:
@@ -110,6 +121,11 @@ _FIGURES = (
     "rms_after_n",
     "max_after_n",
 )
+#: Held-out maxima of the regimes the bounds cover, by the bound each must not be below (absent in older files).
+_REGIME_MAXIMA = {
+    "max_after_retraction_speed_n": "error_bound_with_acceleration_n",
+    "max_after_without_acceleration_n": "error_bound_n",
+}
 
 
 def read_calibration(path: str | Path, arm: str | None = None, *, exact_console: bool = False) -> WrenchCalibration:
@@ -123,8 +139,9 @@ def read_calibration(path: str | Path, arm: str | None = None, *, exact_console:
 
     Raises:
         ConfigurationError: Missing, too large, unreadable, not a wrench calibration, an older file without
-            the sensing and console it was fitted on, another arm's, a bound below its own held-out error or
-            beyond what the safety filter takes, or fitted on exact forces for a console that is not exact.
+            the sensing and console it was fitted on, another arm's, a bound below its own held-out error (in
+            the regime it covers), below :data:`MIN_BOUND_N` or beyond what the safety filter takes, or fitted on
+            exact forces for a console that is not exact.
     """
     field = "--wrench-calibration"
     size = check_regular_file(path, field, max_bytes=2**62).stat().st_size  # a regular file, then its size
@@ -157,6 +174,7 @@ def read_calibration(path: str | Path, arm: str | None = None, *, exact_console:
             samples=int(data["samples"]),
             sensing=str(data["sensing"]),
             console=str(data["console"]),
+            **{k: None if data.get(k) is None else float(data[k]) for k in _REGIME_MAXIMA},
         )
     except (AttributeError, KeyError, TypeError, ValueError) as e:
         raise InputFileError(field, path, f"a file this version of calibrate-wrench wrote ({e})") from e
@@ -172,9 +190,9 @@ def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_con
         raise InputFileError(field, path, f"one parameter per column, columns 0-{total - 1}")
     if not all(map(math.isfinite, calibration.parameters)):
         raise InputFileError(field, path, "finite parameters")
-    for name in _FIGURES:
+    for name in (*_FIGURES, *_REGIME_MAXIMA):
         value = getattr(calibration, name)
-        if not (math.isfinite(value) and value >= 0.0):
+        if value is not None and not (math.isfinite(value) and value >= 0.0):
             raise InputFileError(field, path, f"a finite, non-negative {name} (this file has {value!r})")
     if arm is not None and calibration.arm != arm:
         raise InputFileError(field, path, f"a calibration of {arm} (this one is {calibration.arm}'s)")
@@ -193,6 +211,15 @@ def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_con
                 f"an error_bound_n at least its own {name} (this file has {bound:g} N beside "
                 f"{getattr(calibration, name):g} N: the bound contradicts the fit)",
             )
+    for name, bound_name in _REGIME_MAXIMA.items():
+        shown = getattr(calibration, name)
+        if shown is not None and getattr(calibration, bound_name) < shown:
+            raise InputFileError(
+                field,
+                path,
+                f"an {bound_name} at least its own held-out {name} (this file has "
+                f"{getattr(calibration, bound_name):g} N beside {shown:g} N: the bound is below what its log showed)",
+            )
     if calibration.sensing == EXACT_SENSING and not exact_console:
         raise InputFileError(
             field,
@@ -201,3 +228,12 @@ def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_con
             "free-space efforts were all zero, as on sim-dvrk --wrench ideal: it trusts the force to "
             f"{bound:g} N, which holds on no dVRK; re-run calibrate-wrench against this console)",
         )
+    for name in ("error_bound_n", "error_bound_with_acceleration_n"):
+        if getattr(calibration, name) < MIN_BOUND_N:
+            raise InputFileError(
+                field,
+                path,
+                f"an {name} of at least {MIN_BOUND_N:g} N (this file has {getattr(calibration, name):g} N): no "
+                "calibration of a real arm's sensing is that exact; a log whose efforts show no arm (an exact "
+                "console, a frozen one) made it. Re-run calibrate-wrench",
+            )

@@ -25,6 +25,18 @@ a fit without them is made too, and it is the calibration when the dynamic colum
 by less than :data:`DYNAMICS_GAIN` (an arm whose logs show no inertia; least squares would otherwise fit
 the noise with inertial parameters, and the allowance above would then be that noise at the chain's
 acceleration limits). Its bound is then only as good as the held-out log's accelerations.
+
+A calibration's bounds are never below what its held-out log showed in the regime each covers (see
+:meth:`FreeSpaceError.regimes`), nor below :data:`~hardware_if.wrench.calibration.MIN_BOUND_N`; and a log is
+fitted only when it shows an arm moving under its own dynamics
+(:func:`~hardware_if.wrench.joint_logs.check_free_space_log`).
+
+Memory does not grow with a log's length: the regressor (338 columns, 16 KB a sample) is made
+:data:`CHUNK_SAMPLES` samples at a time and folded into the R factor of a QR decomposition of the weighted
+design with its target, one per contiguous block of the ridge's cross-validation (:func:`_fold_factors`). The
+R factor is the least-squares problem without its rows (``X = Q R``: same column norms, singular values and
+solutions, and the residual of any parameter vector has the same norm), so the fit is the one the whole design
+gives, to rounding; unlike the normal equations (``X^T X``) it does not square the design's condition number.
 """
 
 from __future__ import annotations
@@ -32,21 +44,22 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from hardware_if.wrench.calibration import WrenchCalibration
-from hardware_if.wrench.joint_logs import JointLog, JointLogError
+from hardware_if.wrench.calibration import MIN_BOUND_N, WrenchCalibration
+from hardware_if.wrench.joint_logs import MIN_SAMPLES, JointLog, TooFewSamplesError, check_free_space_log
 from psm_control.effort_model import independent_columns, shared_regressor
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
 from safety.config import SafetyConfig
 
 __all__ = [
+    "CHUNK_SAMPLES",
     "CUTOFF_HZ",
     "DEPTH_BINS_M",
     "MIN_IMPROVEMENT",
@@ -54,6 +67,7 @@ __all__ = [
     "SPEED_BINS_M_S",
     "FreeSpaceError",
     "PreparedLog",
+    "bound_verdict",
     "check_calibration",
     "fit_calibration",
     "inertia_allowance_n",
@@ -82,11 +96,16 @@ MIN_INSERTION_M = 0.045
 #: and a deploy would trust its bound at poses it never saw. On a fresh sim-dvrk the fit is 18-21x lower;
 #: on the public PSM logs 2.5-9x.
 MIN_IMPROVEMENT = 1.5
+#: Samples whose regressor rows are made at a time (16 MB per regressor at 338 columns).
+CHUNK_SAMPLES = 1024
 
 
 @dataclass(frozen=True)
 class PreparedLog:
     """A joint log with what the fit and the check need, per sample.
+
+    The regressor is not kept (16 KB a sample): :meth:`regressor` makes it for a part of the log, and
+    :meth:`chunks` cuts the log in parts of :data:`CHUNK_SAMPLES`.
 
     Attributes:
         log: The log.
@@ -95,7 +114,6 @@ class PreparedLog:
         projector: The console's ``pinv(J^T)`` force rows (N, 3, 6).
         insertion_m: Insertion depth (N,) [m].
         tip_speed_m_s: Tool-tip speed (N,) [m/s].
-        rows: The regressor (N, 6, columns), with and without accelerations (``rows_static``).
     """
 
     log: JointLog
@@ -104,8 +122,6 @@ class PreparedLog:
     projector: np.ndarray
     insertion_m: np.ndarray
     tip_speed_m_s: np.ndarray
-    rows: np.ndarray
-    rows_static: np.ndarray
 
     @property
     def joint_mask(self) -> np.ndarray:
@@ -114,43 +130,60 @@ class PreparedLog:
         mask[: self.log.joints] = True
         return mask
 
+    def chunks(self) -> Iterator[slice]:
+        """The log's samples in consecutive parts of at most :data:`CHUNK_SAMPLES`."""
+        for start in range(0, len(self.log.t_s), CHUNK_SAMPLES):
+            yield slice(start, min(start + CHUNK_SAMPLES, len(self.log.t_s)))
+
+    def regressor(self, part: slice, acceleration: bool = True) -> np.ndarray:
+        """The regressor of the samples in ``part`` (n, 6, columns), zero on joints the log does not carry;
+        ``acceleration=False``: with the accelerations left out, as a deploy computes it."""
+        regressor, zero = shared_regressor(), np.zeros(6)
+        mask = self.joint_mask.astype(float)
+        q, qd, qdd = self.log.q[part], self.qd[part], self.qdd[part]
+        rows = [regressor.rows(q[k], qd[k], qdd[k] if acceleration else zero) * mask[:, None] for k in range(len(q))]
+        return np.stack(rows) if rows else np.zeros((0, 6, regressor.columns))
+
+    def model_efforts(self, parameters: np.ndarray, acceleration: bool = True) -> np.ndarray:
+        """The efforts a parameter vector (columns,) gives along the log (N, 6), or several (columns, k): (N, 6, k)."""
+        parameters = np.asarray(parameters, dtype=float)
+        out = np.zeros((len(self.log.t_s), 6, *parameters.shape[1:]))
+        for part in self.chunks():
+            out[part] = self.regressor(part, acceleration) @ parameters
+        return out
+
 
 def prepare_log(log: JointLog, cutoff_hz: float = CUTOFF_HZ) -> PreparedLog:
-    """Filter, differentiate and compute the regressor and the console's projection of every sample."""
+    """Check the log (:func:`~hardware_if.wrench.joint_logs.check_free_space_log`), then filter, differentiate and
+    compute the console's projection of every sample.
+
+    Raises:
+        JointLogError: A log that does not show an arm moving under its own dynamics, or fewer than
+            :data:`~hardware_if.wrench.joint_logs.MIN_SAMPLES` samples away from the RCM (a subclass says which).
+    """
+    check_free_space_log(log)  # before the filter, which a short or non-finite log would break
     rate = log.rate_hz
     b, a = butter(2, min(cutoff_hz, 0.4 * rate) / (rate / 2.0))
     qd = filtfilt(b, a, log.qd, axis=0)
     qdd = np.gradient(qd, log.t_s, axis=0)
-    regressor = shared_regressor()
-    configuration = PsmModel().configuration()
-    projector, speed = np.zeros((len(log.q), 3, 6)), np.zeros(len(log.q))
-    rows, rows_static = [], []
-    zero = np.zeros(6)
-    mask = np.zeros(6)
-    mask[: log.joints] = 1.0
-    for k, q in enumerate(log.q):
-        configuration.update(q)
-        jacobian = configuration.base_jacobian()
-        projector[k] = np.linalg.pinv(jacobian.T, rcond=1e-4)[:3]
-        speed[k] = float(np.linalg.norm(jacobian[:3] @ log.qd[k]))
-        rows.append(regressor.rows(q, qd[k], qdd[k]) * mask[:, None])
-        rows_static.append(regressor.rows(q, qd[k], zero) * mask[:, None])
     # The console's estimate near the RCM is a pseudo-inverse of a nearly singular Jacobian (thousands of
     # newtons on the public logs' homing moves), where the dVRK refuses Cartesian control anyway.
     keep = log.q[:, 2] >= MIN_INSERTION_M
-    if not np.any(keep):
-        raise JointLogError(log.source, f"samples with the insertion at {MIN_INSERTION_M} m or more")
+    if np.count_nonzero(keep) < MIN_SAMPLES:
+        raise TooFewSamplesError(
+            log.source,
+            f"at least {MIN_SAMPLES} samples with the insertion at {MIN_INSERTION_M} m or more "
+            f"(this log has {np.count_nonzero(keep)})",
+        )
     kept = dataclasses.replace(log, t_s=log.t_s[keep], q=log.q[keep], qd=log.qd[keep], effort=log.effort[keep])
-    return PreparedLog(
-        kept,
-        qd[keep],
-        qdd[keep],
-        projector[keep],
-        log.q[keep, 2].copy(),
-        speed[keep],
-        np.stack(rows)[keep],
-        np.stack(rows_static)[keep],
-    )
+    configuration = PsmModel().configuration()
+    projector, speed = np.zeros((len(kept.q), 3, 6)), np.zeros(len(kept.q))
+    for k, q in enumerate(kept.q):
+        configuration.update(q)
+        jacobian = configuration.base_jacobian()
+        projector[k] = np.linalg.pinv(jacobian.T, rcond=1e-4)[:3]
+        speed[k] = float(np.linalg.norm(jacobian[:3] @ kept.qd[k]))
+    return PreparedLog(kept, qd[keep], qdd[keep], projector, kept.q[:, 2].copy(), speed)
 
 
 @dataclass(frozen=True)
@@ -163,6 +196,8 @@ class FreeSpaceError:
         after_live_n: ... without accelerations, as a deploy computes it (N,) [N].
         insertion_m: Insertion depth per sample [m].
         tip_speed_m_s: Tool-tip speed per sample [m/s].
+        within_acceleration_limits: Whether each sample's joint accelerations are within the control chain's
+            acceleration limits (``SafetyConfig().acceleration``), as a deploy's are (N,).
     """
 
     before_n: np.ndarray
@@ -170,6 +205,7 @@ class FreeSpaceError:
     after_live_n: np.ndarray
     insertion_m: np.ndarray
     tip_speed_m_s: np.ndarray
+    within_acceleration_limits: np.ndarray
 
     @staticmethod
     def _rms(values: np.ndarray) -> float:
@@ -181,6 +217,25 @@ class FreeSpaceError:
         if not np.any(slow):
             slow = np.ones_like(slow)  # a log with no slow samples: its whole error
         return float(self.after_n[slow].max())
+
+    def regimes(self) -> dict[str, tuple[np.ndarray, np.ndarray, str]]:
+        """What each of a calibration's bounds covers, by the bound's name: (the samples inside its regime (N,)
+        bool, the calibrated error it bounds there (N,) [N], the regime in words).
+
+        ``error_bound_with_acceleration_n`` bounds the error with the acceleration known at tip speeds up to
+        :data:`RETRACTION_TIP_SPEED_M_S`; ``error_bound_n`` the error without it (a deploy's) there, while the
+        joints accelerate within the chain's limits (its inertia allowance is taken at those limits).
+        """
+        slow = self.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S
+        speed = f"tip speed <= {RETRACTION_TIP_SPEED_M_S:g} m/s"
+        return {
+            "error_bound_with_acceleration_n": (slow, self.after_n, f"{speed}, the acceleration known"),
+            "error_bound_n": (
+                slow & self.within_acceleration_limits,
+                self.after_live_n,
+                f"{speed} and joint accelerations within the chain's limits, without the acceleration",
+            ),
+        }
 
     def _bins(self, values: np.ndarray, edges: Sequence[float], key: str) -> list[dict[str, Any]]:
         out = []
@@ -216,28 +271,88 @@ class FreeSpaceError:
         }
 
 
-def _free_space_error(parameters: np.ndarray, logs: Sequence[PreparedLog]) -> FreeSpaceError:
-    before: list[np.ndarray] = []
-    after: list[np.ndarray] = []
-    live: list[np.ndarray] = []
+def _free_space_errors(parameters: np.ndarray, logs: Sequence[PreparedLog]) -> list[FreeSpaceError]:
+    """The free-space error of each parameter vector (the columns of ``parameters``, (columns, k)) on ``logs``,
+    in one pass over the logs' regressors, a chunk at a time."""
+    k = parameters.shape[1]
+    before, after, live, within = [], [], [], []
+    limits = SafetyConfig().acceleration
     for p in logs:
         effort = p.log.effort * p.joint_mask
         before.append(np.linalg.norm(np.einsum("kij,kj->ki", p.projector, effort), axis=1))
-        for rows, out in ((p.rows, after), (p.rows_static, live)):
-            residual = effort - rows @ parameters
-            out.append(np.linalg.norm(np.einsum("kij,kj->ki", p.projector, residual), axis=1))
-    return FreeSpaceError(
-        np.concatenate(before),
-        np.concatenate(after),
-        np.concatenate(live),
-        np.concatenate([p.insertion_m for p in logs]),
-        np.concatenate([p.tip_speed_m_s for p in logs]),
-    )
+        within.append(np.all(np.abs(p.qdd) <= limits, axis=1))
+        for acceleration, out in ((True, after), (False, live)):
+            errors = np.zeros((len(effort), k))
+            for part in p.chunks():
+                residual = effort[part][:, :, None] - p.regressor(part, acceleration) @ parameters
+                errors[part] = np.linalg.norm(np.einsum("kij,kjm->kim", p.projector[part], residual), axis=1)
+            out.append(errors)
+    shared = [np.concatenate(x) for x in (before, [p.insertion_m for p in logs], [p.tip_speed_m_s for p in logs])]
+    after_all, live_all, within_all = np.concatenate(after), np.concatenate(live), np.concatenate(within)
+    return [
+        FreeSpaceError(shared[0], after_all[:, m], live_all[:, m], shared[1], shared[2], within_all) for m in range(k)
+    ]
+
+
+def _free_space_error(parameters: np.ndarray, logs: Sequence[PreparedLog]) -> FreeSpaceError:
+    return _free_space_errors(np.asarray(parameters, dtype=float)[:, None], logs)[0]
 
 
 def check_calibration(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) -> FreeSpaceError:
     """The free-space error of the console's estimate and of ``calibration`` on ``logs``."""
     return _free_space_error(calibration.parameter_vector(), logs)
+
+
+def bound_verdict(calibration: WrenchCalibration, error: FreeSpaceError) -> dict[str, Any]:
+    """Whether a calibration's bounds held on logs (``calibrate-wrench --check``'s verdict).
+
+    Each bound is judged on the samples inside its regime (:meth:`FreeSpaceError.regimes`); the others are
+    counted, not judged. The bounds held when at least one sample was judged and none exceeded its bound.
+
+    Returns:
+        ``bound_n`` (the file's bounds by name), ``bound_held``, and by bound: ``regime``, ``regime_samples``,
+        ``outside_regime_samples``, ``max_in_regime_n`` (None with no sample inside) and ``exceeding_samples``.
+    """
+    out: dict[str, Any] = {
+        "bound_n": {},
+        "regime": {},
+        "regime_samples": {},
+        "outside_regime_samples": {},
+        "max_in_regime_n": {},
+        "exceeding_samples": {},
+    }
+    for name, (inside, values, words) in error.regimes().items():
+        bound = float(getattr(calibration, name))
+        judged = values[inside]
+        out["bound_n"][name] = bound
+        out["regime"][name] = words
+        out["regime_samples"][name] = int(inside.sum())
+        out["outside_regime_samples"][name] = int(len(inside) - inside.sum())
+        out["max_in_regime_n"][name] = float(judged.max()) if len(judged) else None
+        out["exceeding_samples"][name] = int(np.count_nonzero(judged > bound))
+    judged_any = any(out["regime_samples"].values())
+    out["bound_held"] = bool(judged_any and not any(out["exceeding_samples"].values()))
+    return out
+
+
+def verdict_line(verdict: dict[str, Any]) -> str:
+    """The verdict of :func:`bound_verdict` in one line."""
+    parts = []
+    for name, bound in verdict["bound_n"].items():
+        inside, largest = verdict["regime_samples"][name], verdict["max_in_regime_n"][name]
+        seen = f"largest {largest:.2f} N over {inside} samples" if largest is not None else "no sample inside"
+        over = verdict["exceeding_samples"][name]
+        parts.append(
+            f"{name} {bound:.2f} N: {seen}{f', {over} above it' if over else ''} "
+            f"({verdict['outside_regime_samples'][name]} outside its regime, not judged)"
+        )
+    if verdict["bound_held"]:
+        head = "bound held: the calibrated error stayed within the file's bounds"
+    elif not any(verdict["regime_samples"].values()):
+        head = "BOUND NOT JUDGED: no sample of the logs is inside the regimes the file bounds"
+    else:
+        head = "BOUND EXCEEDED: the calibrated error went above the file's bounds"
+    return f"{head}; " + "; ".join(parts)
 
 
 def inertia_allowance_n(
@@ -281,50 +396,85 @@ def _ridge_solver(design: np.ndarray, target: np.ndarray) -> Callable[[float], n
     return solve
 
 
-def _ridge_strength(design: np.ndarray, target: np.ndarray) -> float:
-    """The ridge strength with the least error on held-out contiguous blocks of the fit's own rows.
+def _stacked_factor(factors: Sequence[np.ndarray]) -> np.ndarray:
+    """The R factor of the rows the ``factors`` (R factors of blocks of rows) stand for."""
+    return np.asarray(np.linalg.qr(np.vstack(factors), mode="r"))
+
+
+def _fold_factors(fit: Sequence[PreparedLog], weights: Sequence[np.ndarray]) -> tuple[list[np.ndarray], int]:
+    """The R factors of the weighted design with its target as the last column, ``[X | y]``, one per contiguous
+    block of rows the ridge's strength is cross-validated on (:data:`_FOLDS` blocks of the rows in log, sample and
+    joint order), each folded in a chunk of :data:`CHUNK_SAMPLES` samples at a time; and the number of rows."""
+    rows_total = 6 * sum(len(p.log.t_s) for p in fit)
+    edges = np.linspace(0, rows_total, _FOLDS + 1).astype(int)
+    factors: list[np.ndarray | None] = [None] * _FOLDS
+    offset = 0
+    for p, w in zip(fit, weights, strict=True):
+        for part in p.chunks():
+            rows = p.regressor(part)
+            block = np.column_stack(
+                [(rows * w[None, :, None]).reshape(-1, rows.shape[2]), (p.log.effort[part] * w).reshape(-1)]
+            )
+            for fold in range(_FOLDS):
+                low, high = max(edges[fold], offset), min(edges[fold + 1], offset + len(block))
+                if low < high:
+                    piece = block[low - offset : high - offset]
+                    previous = factors[fold]
+                    factors[fold] = _stacked_factor([piece] if previous is None else [previous, piece])
+            offset += len(block)
+    return [f for f in factors if f is not None], rows_total
+
+
+def _ridge_strength(factors: Sequence[np.ndarray], columns: np.ndarray) -> float:
+    """The ridge strength with the least error on held-out contiguous blocks of the fit's own rows (``factors``:
+    one R factor of ``[X | y]`` per block, :func:`_fold_factors`), on the design's ``columns``.
 
     Why ridge: the effort regressor has dozens of columns, and a short excitation (the live calibration's 20 s
     about one pose) excites some of them little. Least squares gives those large values that fit the
     effort's correlated noise and extrapolate badly to the next motion; a penalty chosen on blocks the fit did
     not see keeps only what generalises. Contiguous blocks, because the noise is correlated in time.
     """
-    edges = np.linspace(0, len(target), _FOLDS + 1).astype(int)
+    target = factors[0].shape[1] - 1
     errors = np.zeros(len(_RIDGE_STRENGTHS))
-    for start, stop in itertools.pairwise(edges):
-        keep = np.ones(len(target), dtype=bool)
-        keep[start:stop] = False
-        solve = _ridge_solver(design[keep], target[keep])
+    for held in range(len(factors)):
+        kept = _stacked_factor([f for k, f in enumerate(factors) if k != held])
+        solve = _ridge_solver(kept[:, columns], kept[:, target])
+        block = factors[held]
         for k, strength in enumerate(_RIDGE_STRENGTHS):
-            errors[k] += float(np.sum(np.square(design[start:stop] @ solve(strength) - target[start:stop])))
+            errors[k] += float(np.sum(np.square(block[:, columns] @ solve(strength) - block[:, target])))
     return _RIDGE_STRENGTHS[int(np.argmin(errors))]
 
 
-def _solve(design: np.ndarray, target: np.ndarray, samples: int, exclude: int) -> tuple[np.ndarray, np.ndarray]:
+def _solve(factors: Sequence[np.ndarray], rows_total: int, samples: int, exclude: int) -> tuple[np.ndarray, np.ndarray]:
     """Ridge least squares (:func:`_ridge_strength`) on the identifiable columns from ``exclude`` on: (their
     indices, the full parameter vector).
 
     Raises:
         ConfigurationError: Too few samples for the columns.
     """
-    columns = exclude + independent_columns(design[:, exclude:])
-    if len(target) < 4 * len(columns):
+    whole = _stacked_factor(factors)
+    target = whole.shape[1] - 1
+    columns = exclude + independent_columns(whole[:, exclude:target])
+    if rows_total < 4 * len(columns):
         raise ConfigurationError(
             "samples", samples, f"at least {4 * len(columns) // 6} to fit {len(columns)} parameters"
         )
-    chosen = design[:, columns]
-    values = _ridge_solver(chosen, target)(_ridge_strength(chosen, target))
-    parameters = np.zeros(design.shape[1])
+    values = _ridge_solver(whole[:, columns], whole[:, target])(_ridge_strength(factors, columns))
+    parameters = np.zeros(target)
     parameters[columns] = values
     return columns, parameters
 
 
 def unimproved(calibration: WrenchCalibration) -> str:
     """Why a fitted calibration must not be written (its held-out error not :data:`MIN_IMPROVEMENT` x lower
-    than the console's), or "" when it may. A console whose free-space efforts were all zero (an exact force)
-    has nothing to improve and may be written, marked as such."""
+    than the console's, or no console error at all), or "" when it may."""
     before, after = calibration.rms_before_n, calibration.rms_after_n
-    if before == 0.0 or after * MIN_IMPROVEMENT <= before:
+    if not before > 0.0:
+        return (
+            "the console's held-out free-space force error is 0 N: its efforts show no arm dynamics (a console "
+            "that reports the exact force needs no calibration)"
+        )
+    if after * MIN_IMPROVEMENT <= before:
         return ""
     return (
         f"the fit lowers the held-out free-space force error only from {before:.3f} to {after:.3f} N RMS "
@@ -339,6 +489,11 @@ def fit_calibration(
 ) -> tuple[WrenchCalibration, FreeSpaceError]:
     """Fit on free-space logs and check on others (see the module notes).
 
+    The bounds: ``error_bound_with_acceleration_n`` is 1.25 x the largest held-out error at retraction speeds;
+    ``error_bound_n`` 1.25 x that plus the inertia allowance, and at least the largest held-out error without
+    the acceleration in its regime (:meth:`FreeSpaceError.regimes`), the largest held-out error at any speed
+    and the other bound; both at least :data:`~hardware_if.wrench.calibration.MIN_BOUND_N`.
+
     Returns:
         The calibration and its free-space error on ``held_out``.
 
@@ -352,28 +507,32 @@ def fit_calibration(
     for p in fit:
         spread = np.std(p.log.effort, axis=0)
         weights.append(np.where(p.joint_mask, 1.0 / np.maximum(spread, 1e-3), 0.0))
-    design = np.concatenate(
-        [(p.rows * w[None, :, None]).reshape(-1, p.rows.shape[2]) for p, w in zip(fit, weights, strict=True)]
-    )
-    target = np.concatenate([(p.log.effort * w).reshape(-1) for p, w in zip(fit, weights, strict=True)])
+    factors, rows_total = _fold_factors(fit, weights)
     dynamic = shared_regressor().friction_start // 4  # the first columns: the rigid body's inertia and Coriolis
-    fits = [_solve(design, target, samples, exclude=0), _solve(design, target, samples, exclude=dynamic)]
-    errors = [FreeSpaceError._rms(_free_space_error(parameters, held_out).after_n) for _, parameters in fits]
+    fits = [_solve(factors, rows_total, samples, exclude=0), _solve(factors, rows_total, samples, exclude=dynamic)]
+    candidates = _free_space_errors(np.column_stack([parameters for _, parameters in fits]), held_out)
+    errors = [FreeSpaceError._rms(candidate.after_n) for candidate in candidates]
     with_dynamics = not errors[0] > (1.0 - DYNAMICS_GAIN) * errors[1]
     columns, parameters = fits[0] if with_dynamics else fits[1]
+    error = candidates[0] if with_dynamics else candidates[1]
     values = parameters[columns]
-    error = _free_space_error(parameters, held_out)
     slow = error.retraction_max_n()
+    with_acceleration = max(_BOUND_MARGIN * slow, MIN_BOUND_N)
+    inside, live, _ = error.regimes()["error_bound_n"]
+    shown = [float(error.after_n.max()), with_acceleration] + ([float(live[inside].max())] if np.any(inside) else [])
+    allowance = inertia_allowance_n(parameters, held_out) if with_dynamics else 0.0
     calibration = WrenchCalibration(
         arm=arm,
         columns=tuple(int(c) for c in columns),
         parameters=tuple(float(v) for v in values),
-        error_bound_n=_BOUND_MARGIN * (slow + (inertia_allowance_n(parameters, held_out) if with_dynamics else 0.0)),
-        error_bound_with_acceleration_n=_BOUND_MARGIN * slow,
+        error_bound_n=max(_BOUND_MARGIN * (slow + allowance), *shown),
+        error_bound_with_acceleration_n=with_acceleration,
         rms_before_n=FreeSpaceError._rms(error.before_n),
         max_before_n=float(error.before_n.max()),
         rms_after_n=FreeSpaceError._rms(error.after_n),
         max_after_n=float(error.after_n.max()),
         samples=samples,
+        max_after_retraction_speed_n=slow,
+        max_after_without_acceleration_n=float(live[inside].max()) if np.any(inside) else None,
     )
     return calibration, error

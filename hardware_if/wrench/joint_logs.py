@@ -18,7 +18,12 @@ Layouts read by :func:`read_joint_log`:
   ``*_results.csv`` of its three-joint scripts (``q, qd, effort`` of yaw, pitch, insertion, 200 Hz). Files
   without a time column: the rate is 250 Hz for a folder whose name says ``250``, else 200 Hz, or ``rate_hz``.
 
-Bad logs raise a :class:`JointLogError` subclass that names the file and what is wrong.
+Bad logs raise a :class:`JointLogError` subclass that names the file and what is wrong. A file is opened only
+when it is a regular file of at most :data:`MAX_LOG_BYTES` (a FIFO named ``.csv`` would block, a link to
+``/dev/zero`` never ends), and a CSV log is read to at most :data:`MAX_SAMPLES` rows.
+
+What a fit or a check may take from a log that was read is :func:`check_free_space_log`'s: finite values within
+the arm's ranges, efforts that vary on every joint the log carries, enough samples to filter.
 """
 
 from __future__ import annotations
@@ -32,17 +37,31 @@ from typing import Any
 import numpy as np
 
 from psm_control.errors import InputFileError
+from psm_control.inputs import check_regular_file
+from psm_control.spec import psm_spec
 
 __all__ = [
+    "EFFORT_SPREAD_FLOOR",
     "JOINT_NAMES",
+    "JOINT_RANGE_MARGIN",
     "LND_COUPLING",
+    "MAX_EFFORT",
+    "MAX_LOG_BYTES",
+    "MAX_SAMPLES",
+    "MIN_SAMPLES",
+    "SPEED_FACTOR",
+    "ImplausibleLogError",
     "JointLog",
     "JointLogError",
     "LogLayoutError",
     "MissingTopicError",
     "NoEffortsError",
     "NonFiniteLogError",
+    "StillEffortsError",
+    "TooFewSamplesError",
+    "TooLongLogError",
     "TruncatedLogError",
+    "check_free_space_log",
     "joint_log_from_ticks",
     "read_joint_log",
 ]
@@ -53,6 +72,30 @@ JOINT_NAMES = ("yaw", "pitch", "insertion", "roll", "wrist_pitch", "wrist_yaw")
 #: (WPI-AIM/dvrk_dynamics_identification, ``M_motor2dvrk_q``, the dVRK's 400006 instrument).
 LND_COUPLING = np.array([[1.0186, 0.0, 0.0], [-0.8306, 0.6089, 0.6089], [0.0, -1.2177, 1.2177]])
 _MIN_SAMPLES = 10
+#: Largest log file read [bytes] (512 MiB): an hour of a WPI-layout CSV at 200 Hz is about 310 MB.
+MAX_LOG_BYTES = 512 * 1024 * 1024
+#: Most samples a log may have: an hour at 200 Hz, the public logs' rate (a fit streams its regressor, so its
+#: memory does not grow with this; the per-sample arrays a log keeps do, about 0.5 KB a sample).
+MAX_SAMPLES = 720_000
+#: Fewest samples a fit or a check takes from one log (after the samples near the RCM are left out): the
+#: velocities are filtered at 4 Hz forwards and backwards, and a log shorter than that filter's period (0.25 s,
+#: 50 samples at 200 Hz) has no accelerations to speak of; the filter itself needs more than 3 x (order + 1) = 9.
+MIN_SAMPLES = 60
+#: Margin beyond the Classic PSM's joint ranges (:func:`psm_control.spec.psm_spec`) a log's positions may reach
+#: [rad on the revolute joints, m on the insertion]: the public logs reach 2 mm below the insertion's 0 (homing)
+#: and stay within the revolute ranges; an encoder off by more than this is not the arm the model describes.
+JOINT_RANGE_MARGIN = (0.1, 0.1, 0.01, 0.1, 0.1, 0.1)
+#: Largest joint speed a log may show, as a multiple of the dVRK's move_jp velocity limits (90 deg/s on yaw and
+#: pitch, 0.2 m/s on the insertion, 1080 deg/s on the wrist): the public logs' fastest is 1.6 x (the insertion at
+#: 0.32 m/s).
+SPEED_FACTOR = 10.0
+#: Largest joint effort a log may show [N m on the revolute joints, N on the insertion]: 20 x the largest on the
+#: public PSMs' logs (5.0 N on the insertion), beyond what the PSM's motors give.
+MAX_EFFORT = 100.0
+#: Smallest spread (standard deviation) of each carried joint's efforts [N m, or N on the insertion]: an arm that
+#: moves under its own dynamics shows at least its motor currents' noise (the public logs' quietest joint, radiang's
+#: roll held at 0, spreads by 4e-4 N m); a console that reports the exact force sends zeros (or a constant).
+EFFORT_SPREAD_FLOOR = 1e-4
 
 
 class JointLogError(InputFileError):
@@ -88,6 +131,23 @@ class TruncatedLogError(JointLogError):
     """A storage file that ends early (a recording cut off) and cannot be read."""
 
 
+class TooFewSamplesError(JointLogError):
+    """Fewer samples than a fit or a check needs (:data:`MIN_SAMPLES`)."""
+
+
+class TooLongLogError(JointLogError):
+    """More samples than a log may have (:data:`MAX_SAMPLES`)."""
+
+
+class ImplausibleLogError(JointLogError):
+    """Finite values no PSM gives: a joint outside its range, a speed or an effort beyond the arm's (named)."""
+
+
+class StillEffortsError(JointLogError):
+    """Efforts that do not vary on a joint the log carries: no arm moving under its own dynamics (all zero: a
+    console that reports the exact force, or sends no efforts)."""
+
+
 @dataclass(frozen=True)
 class JointLog:
     """One free-space joint log: N samples of the six arm joints, in the dVRK's joint space.
@@ -119,6 +179,10 @@ class JointLog:
 def _checked(log: JointLog) -> JointLog:
     if len(log.t_s) < _MIN_SAMPLES:
         raise TruncatedLogError(log.source, f"{len(log.t_s)} samples; at least {_MIN_SAMPLES} are needed")
+    if len(log.t_s) > MAX_SAMPLES:
+        raise TooLongLogError(
+            log.source, f"at most {MAX_SAMPLES} samples (an hour at 200 Hz; this log has {len(log.t_s)}): split it"
+        )
     for name in ("q", "qd", "effort"):
         values = getattr(log, name)
         bad = np.argwhere(~np.isfinite(values))
@@ -132,6 +196,83 @@ def _checked(log: JointLog) -> JointLog:
     return log
 
 
+def check_free_space_log(log: JointLog, *, min_samples: int = MIN_SAMPLES) -> None:
+    """Refuse a log that does not show an arm moving under its own dynamics, before anything is fitted on it.
+
+    Checked: at least ``min_samples`` samples; finite positions, velocities and efforts; positions within the
+    Classic PSM's joint ranges widened by :data:`JOINT_RANGE_MARGIN`; speeds within :data:`SPEED_FACTOR` x the
+    dVRK's move_jp limits; efforts within :data:`MAX_EFFORT`; and on every joint the log carries, efforts that
+    spread by at least :data:`EFFORT_SPREAD_FLOOR`.
+
+    Raises:
+        JointLogError: A subclass naming the first thing wrong: :class:`TooFewSamplesError`,
+            :class:`NonFiniteLogError`, :class:`ImplausibleLogError` or :class:`StillEffortsError`.
+    """
+    n = len(log.t_s)
+    if n < min_samples:
+        raise TooFewSamplesError(
+            log.source,
+            f"at least {min_samples} samples to filter and fit (this log has {n}; its velocities are filtered at "
+            "4 Hz: record a few seconds or more)",
+        )
+    for name in ("q", "qd", "effort"):
+        values = getattr(log, name)
+        bad = np.argwhere(~np.isfinite(values))
+        if len(bad):
+            sample, joint = (int(i) for i in bad[0])
+            raise NonFiniteLogError(
+                log.source, f"{name} of joint {JOINT_NAMES[joint]} is {values[sample, joint]} at sample {sample}"
+            )
+    spec = psm_spec()
+    margin = np.asarray(JOINT_RANGE_MARGIN)
+    units = ("rad", "rad", "m", "rad", "rad", "rad")
+    lower, upper = spec.lower - margin, spec.upper + margin
+    for joint in range(log.joints):
+        column = log.q[:, joint]
+        outside = np.flatnonzero((column < lower[joint]) | (column > upper[joint]))
+        if len(outside):
+            k = int(outside[0])
+            raise ImplausibleLogError(
+                log.source,
+                f"joint positions within the PSM's ranges (+-{margin[joint]:g} {units[joint]}): {JOINT_NAMES[joint]} "
+                f"is {column[k]:g} {units[joint]} at sample {k}, its range {spec.lower[joint]:g} to "
+                f"{spec.upper[joint]:g} {units[joint]}",
+            )
+    fastest = SPEED_FACTOR * spec.velocity_limit
+    for joint in range(log.joints):
+        k = int(np.argmax(np.abs(log.qd[:, joint])))
+        if abs(log.qd[k, joint]) > fastest[joint]:
+            raise ImplausibleLogError(
+                log.source,
+                f"joint speeds within {SPEED_FACTOR:g} x the dVRK's move_jp limits: {JOINT_NAMES[joint]} moves at "
+                f"{log.qd[k, joint]:g} {units[joint]}/s at sample {k}, above {fastest[joint]:g}",
+            )
+        k = int(np.argmax(np.abs(log.effort[:, joint])))
+        if abs(log.effort[k, joint]) > MAX_EFFORT:
+            raise ImplausibleLogError(
+                log.source,
+                f"joint efforts of at most {MAX_EFFORT:g} N m (N on the insertion), as a PSM's motors give: "
+                f"{JOINT_NAMES[joint]}'s is {log.effort[k, joint]:g} at sample {k}",
+            )
+    spread = np.std(log.effort[:, : log.joints], axis=0)
+    if not np.any(log.effort[:, : log.joints]):
+        raise StillEffortsError(
+            log.source,
+            "a log of an arm moving under its own dynamics, whose efforts vary (every effort in this log is 0: its "
+            "console reports the exact force, as sim-dvrk --wrench ideal does, or sends no efforts; an exact "
+            "console needs no calibration)",
+        )
+    still = [JOINT_NAMES[j] for j in range(log.joints) if spread[j] < EFFORT_SPREAD_FLOOR]
+    if still:
+        raise StillEffortsError(
+            log.source,
+            f"efforts that vary on every joint the log carries, by at least {EFFORT_SPREAD_FLOOR:g} N m or N "
+            f"(standard deviation); {', '.join(still)} do not (spread "
+            f"{', '.join(f'{spread[JOINT_NAMES.index(j)]:.3g}' for j in still)}): not an arm moving under its own "
+            "dynamics",
+        )
+
+
 def _from_motor_space(q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, ...]:
     """The WPI logs' wrist pitch, wrist yaw and jaw from motor space to the dVRK's joints."""
     q, qd, tau = q.copy(), qd.copy(), tau.copy()
@@ -142,10 +283,13 @@ def _from_motor_space(q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[n
 
 
 def _load_csv(path: Path) -> np.ndarray:
+    check_regular_file(path, "--from", MAX_LOG_BYTES)
     try:
-        values = np.loadtxt(path, delimiter=",", ndmin=2)
+        values = np.loadtxt(path, delimiter=",", ndmin=2, max_rows=MAX_SAMPLES + 1)
     except (OSError, ValueError) as e:
         raise LogLayoutError(path, f"comma-separated numbers ({e})") from e
+    if len(values) > MAX_SAMPLES:
+        raise TooLongLogError(path, f"at most {MAX_SAMPLES} rows (an hour at 200 Hz): split the log")
     return values
 
 
@@ -222,6 +366,8 @@ def _read_bag(path: Path, arm: str) -> JointLog:
                 topics = sorted({c.topic for c in reader.connections}) or ["none"]
                 raise MissingTopicError(path, f"a bag with {topic}; it has {', '.join(topics)} (--arm picks the arm)")
             for connection, stamp_ns, raw in reader.messages(connections=connections):
+                if len(times) >= MAX_SAMPLES:
+                    raise TooLongLogError(path, f"at most {MAX_SAMPLES} {topic} messages (an hour at 200 Hz)")
                 message: Any = typestore.deserialize_cdr(raw, connection.msgtype)
                 names = list(message.name)
                 if len(message.effort) < 6:
@@ -325,12 +471,15 @@ def read_joint_log(path: str | Path, *, arm: str = "PSM1", rate_hz: float | None
 
     Raises:
         JointLogError: The file is missing or not a usable log (a subclass says why).
+        InputFileError: A file that is not a regular file of at most :data:`MAX_LOG_BYTES`.
     """
     path = Path(path)
     if not path.exists():
         raise LogLayoutError(path, "an existing bag, recording, CSV file or folder")
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0.0):
         raise LogLayoutError(path, f"a sample rate > 0 (got {rate_hz})")
+    if not path.is_dir():  # before anything opens it: a FIFO blocks, a device never ends
+        check_regular_file(path, "--from", MAX_LOG_BYTES)
     if path.is_dir():
         if (path / "metadata.yaml").exists():
             return _read_bag(path, arm)

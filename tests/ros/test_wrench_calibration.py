@@ -181,3 +181,46 @@ def test_a_stopped_calibration_exits_128_plus_the_signal_with_one_plain_line(
         "the arm holds where it is"
     ], errors
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_an_exact_console_is_refused_live_and_offline(ros_env: dict[str, str], tmp_path: Path) -> None:
+    """Against sim-dvrk --wrench ideal (every joint effort 0 in free space), calibrate-wrench exits 1 saying the
+    console reports the exact force and needs no calibration, and writes none; the bag it recorded, fitted
+    offline, is refused the same way."""
+    process = start_sim_dvrk(ros_env, "--wrench", "ideal")
+    try:
+        rclpy.init()
+        try:
+            with PsmClient("PSM1", node_name="test_exact_console_homer", deadman_timeout_s=0.5) as client:
+                client.wait_for_measurement(timeout_s=60.0)
+                client.enable(timeout_s=30.0)
+                client.home(timeout_s=30.0)
+        finally:
+            rclpy.shutdown()
+        out, bag = tmp_path / "wrench.json", tmp_path / "excitation"
+        command = [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--domain-id", ros_env["ROS_DOMAIN_ID"]]
+        live = subprocess.run(
+            [*command, "--out", str(out), "--duration", "5", "--wait", "60", "--record", str(bag)],
+            env=ros_env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
+    finally:
+        stop(process)
+    output = live.stdout + live.stderr
+    assert live.returncode == 1 and not out.exists(), output
+    assert "reports the exact force" in live.stderr and "needs no calibration" in live.stderr, output
+    assert "Traceback" not in output
+    offline = subprocess.run(
+        [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--from", str(bag), "--out", str(out)],
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert offline.returncode == 1 and not out.exists(), offline.stdout + offline.stderr
+    assert "every effort in this log is 0" in offline.stderr, offline.stderr

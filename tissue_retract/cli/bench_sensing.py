@@ -132,7 +132,7 @@ def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
     fit = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.logs]
     held_out = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.held_out]
     calibration, _ = fit_calibration(args.arm, fit, held_out)
-    residual = np.concatenate([p.log.effort - p.rows @ calibration.parameter_vector() for p in held_out])
+    residual = np.concatenate([p.log.effort - p.model_efforts(calibration.parameter_vector()) for p in held_out])
     speed = np.abs(np.concatenate([p.qd for p in held_out]))
     spreads = [_spread_with_speed(residual[:, joint], speed[:, joint]) for joint in range(6)]
     moving, band, band_speed = (tuple(float(s[i]) for s in spreads) for i in range(3))
@@ -165,13 +165,13 @@ def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
     return arm, list(args.held_out)
 
 
-def _arm_errors(log: PreparedLog, arm: IdentifiedArm, rng: np.random.Generator) -> np.ndarray:
-    """The identified arm's free-space error along the log's motion (N,) [N]: its efforts and its residual, drawn
-    as the sensing model draws it."""
+def _arm_errors(log: PreparedLog, arm: IdentifiedArm, efforts: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The identified arm's free-space error along the log's motion (N,) [N]: its efforts (``efforts``, (N, 6), the
+    same for every draw) and its residual, drawn as the sensing model draws it."""
     residual = ArmResidual(arm, 1.0, rng)
     dt_s = 1.0 / log.log.rate_hz
     drawn = np.array([residual.advance(dt_s, qd) for qd in log.qd])
-    return _norms(log, log.rows @ arm.parameter_vector() + drawn)
+    return _norms(log, efforts + drawn)
 
 
 def _norms(log: PreparedLog, efforts: np.ndarray) -> np.ndarray:
@@ -260,7 +260,10 @@ def run(args: argparse.Namespace) -> int:
                 {
                     "real console": _norms(log, log.log.effort),
                     "dvrk preset": _over_draws(args.draws, functools.partial(_preset_errors, log, "dvrk")),
-                    f"{arm.name}": _over_draws(args.draws, functools.partial(_arm_errors, log, arm)),
+                    f"{arm.name}": _over_draws(
+                        args.draws,
+                        functools.partial(_arm_errors, log, arm, log.model_efforts(arm.parameter_vector())),
+                    ),
                 },
             )
         }

@@ -8,7 +8,10 @@ recordings, the public WPI and radiang CSV layouts)::
 
 The first fits on the ``--from`` logs and checks on ``--held-out`` (default: the last ``--from`` log when there
 are several, else the last third of the one); the second prints the free-space force error of the console's
-estimate and of the calibrated one on the logs, overall and by insertion depth and tool-tip speed.
+estimate and of the calibrated one on the logs, overall and by insertion depth and tool-tip speed, and its
+verdict: whether the file's bounds held on the samples inside the regimes they cover (exit 1 when not).
+A log is fitted or checked on only when it shows an arm moving under its own dynamics
+(:func:`hardware_if.wrench.joint_logs.check_free_space_log`).
 
 Live, with no tissue in the jaws, the arm is driven through two short excitation trajectories (Lissajous
 motions of the tool tip with a yaw swing about the start, the tool 12 cm in and the jaws open, through the
@@ -203,8 +206,15 @@ def _table(summary: dict[str, Any]) -> str:
 def _offline(args: argparse.Namespace) -> int:
     """Fit on logs or check a calibration on them; 0, or 1 with the reason."""
     from hardware_if.wrench.calibration import read_calibration
-    from hardware_if.wrench.fit import check_calibration, fit_calibration, prepare_log, unimproved
-    from hardware_if.wrench.joint_logs import read_joint_log
+    from hardware_if.wrench.fit import (
+        bound_verdict,
+        check_calibration,
+        fit_calibration,
+        prepare_log,
+        unimproved,
+        verdict_line,
+    )
+    from hardware_if.wrench.joint_logs import MIN_SAMPLES, check_free_space_log, read_joint_log
 
     def prepared(paths: list[str]) -> list[Any]:
         return [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in paths]
@@ -213,12 +223,15 @@ def _offline(args: argparse.Namespace) -> int:
         if args.json:
             check_output_path(args.json, "--json", (args.check, *args.logs))
         calibration = read_calibration(args.check, exact_console=True)  # checked on logs, not a console
-        summary = check_calibration(calibration, prepared(args.logs)).summary()
+        error = check_calibration(calibration, prepared(args.logs))
+        verdict = bound_verdict(calibration, error)
+        summary = error.summary() | verdict
         print(_table(summary))
+        print(verdict_line(verdict))
         if args.json:
             write_atomic(args.json, json.dumps(summary, indent=2) + "\n", "--json")
             print(f"written to {args.json}")
-        return 0
+        return 0 if verdict["bound_held"] else 1
     if args.out is None:
         raise ConfigurationError("--out", None, "a file to write the calibration to (or --check F.json)")
     output = check_output_path(args.out, "--out", (*args.logs, *(args.held_out or ())))
@@ -229,6 +242,7 @@ def _offline(args: argparse.Namespace) -> int:
         fit, held_out = [prepare_log(log) for log in logs[:-1]], [prepare_log(logs[-1])]
     else:
         log, cut = logs[0], 2 * len(logs[0].t_s) // 3
+        check_free_space_log(log, min_samples=3 * MIN_SAMPLES)  # a third of it is held out
         parts = [
             dataclasses.replace(log, t_s=log.t_s[s], q=log.q[s], qd=log.qd[s], effort=log.effort[s])
             for s in (slice(0, cut), slice(cut, None))
@@ -297,8 +311,8 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
     from hardware_if.common.session import ros_session
     from hardware_if.deploy.stopping import STOP_SIGNALS, Interrupted
     from hardware_if.wrench.bag_writer import write_joint_bag
-    from hardware_if.wrench.calibration import EXACT_SENSING
     from hardware_if.wrench.fit import fit_calibration, prepare_log, unimproved
+    from hardware_if.wrench.joint_logs import JointLogError
 
     # The console's force estimate is what is being calibrated: in free space all of it is error (10 N and more
     # on a real arm). The chain is told so, as deploy tells it for an uncalibrated dVRK: taken for a tissue
@@ -356,8 +370,25 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
                 except TissueRetractError as e:  # the fit still runs: the calibration keeps what the arm did
                     record_error = e
                     print(f"tissue-retract calibrate-wrench: error: {e}; fitting all the same", file=sys.stderr)
+            if not np.any(fit.effort) and not np.any(held_out.effort):
+                print(
+                    f"tissue-retract calibrate-wrench: error: {args.arm}'s console reported every joint effort as 0 "
+                    "in free space: it reports the exact force (as sim-dvrk --wrench ideal does) or sends no "
+                    "efforts. An exact console needs no calibration: deploy without --wrench-calibration; no "
+                    "calibration written",
+                    file=sys.stderr,
+                )
+                return 1
             stage = "the fit"
-            calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
+            try:
+                calibration, _ = fit_calibration(args.arm, [prepare_log(fit)], [prepare_log(held_out)])
+            except JointLogError as e:
+                print(
+                    "tissue-retract calibrate-wrench: error: the excitation's joint log does not show an arm moving "
+                    f"under its own dynamics: expected {e.reason}; no calibration written",
+                    file=sys.stderr,
+                )
+                return 1
     except Interrupted as e:
         print(
             f"tissue-retract calibrate-wrench: stopped by {signal.Signals(e.signum).name} during {stage}: "
@@ -365,15 +396,7 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
             file=sys.stderr,
         )
         return 128 + e.signum
-    exact = not np.any(fit.effort) and not np.any(held_out.effort)
-    calibration = dataclasses.replace(
-        calibration, sensing=EXACT_SENSING if exact else "measured_js", console=console_kind(consoles)
-    )
-    if exact:
-        print(
-            f"{args.arm}: the console's efforts were all zero in free space: it reports the exact force (or "
-            "sends no efforts); the file says so and a deploy to a dVRK refuses it"
-        )
+    calibration = dataclasses.replace(calibration, sensing="measured_js", console=console_kind(consoles))
     print(
         f"free-space force error on the held-out trajectory ({len(held_out.t_s)} samples): "
         f"before RMS {calibration.rms_before_n:.3f} N, max {calibration.max_before_n:.3f} N; "

@@ -56,11 +56,17 @@ def test_a_calibration_not_to_trust_is_refused_naming_the_file(
     assert reason in str(caught.value) and str(path) in str(caught.value), caught.value
 
 
-def test_an_exact_force_calibration_is_still_checked_on_logs(tmp_path: Path) -> None:
-    """Fitted on an exact console, a calibration is refused for a console but reads for a check on logs."""
+def test_a_bound_below_the_floor_or_its_held_out_maximum_is_refused_even_for_a_check(tmp_path: Path) -> None:
+    """A 0 N bound (an exact console's fit) is refused for a check on logs too, and a bound below the held-out
+    maximum of the regime it covers is refused; above both, the file reads for a check."""
     zeros = dict.fromkeys(("error_bound_n", "error_bound_with_acceleration_n", "max_after_n", "rms_after_n"), 0.0)
-    path = _file(tmp_path, sensing="ideal", **zeros)
-    assert read_calibration(path, exact_console=True).sensing == "ideal"
+    with pytest.raises(ConfigurationError, match=r"error_bound_n of at least 0\.5 N \(this file has 0 N\)"):
+        read_calibration(_file(tmp_path, sensing="ideal", **zeros), exact_console=True)
+    with pytest.raises(ConfigurationError, match="at least its own held-out max_after_retraction_speed_n"):
+        read_calibration(_file(tmp_path, max_after_retraction_speed_n=0.6), exact_console=True)
+    with pytest.raises(ConfigurationError, match="at least its own held-out max_after_without_acceleration_n"):
+        read_calibration(_file(tmp_path, max_after_without_acceleration_n=1.5), exact_console=True)
+    assert read_calibration(_file(tmp_path, max_after_retraction_speed_n=0.4), exact_console=True).samples == 1000
 
 
 def test_a_file_over_one_mebibyte_is_refused_by_its_size(tmp_path: Path) -> None:

@@ -1,0 +1,78 @@
+"""calibrate-wrench --check: a verdict on the file's bounds, judged inside the regimes they cover, and its exit."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from arm_logs import arm_bag
+
+from tests.conftest import run_cli
+
+SAMPLES = 3000
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A calibration fitted on one log of the arm and held out on another; a third log of the same arm, and one of
+    an arm whose efforts are 1.5 x as large (another arm, or a load in the jaws)."""
+    folder = tmp_path_factory.mktemp("verdict")
+    logs = {
+        "fit": arm_bag(folder / "fit", SAMPLES, 0.0, noise=0.02),
+        "held_out": arm_bag(folder / "held", SAMPLES, 1.0, noise=0.02),
+        "same_arm": arm_bag(folder / "same", SAMPLES, 2.0, noise=0.02),
+        "other_arm": arm_bag(folder / "other", SAMPLES, 2.0, noise=0.02, scale=1.5),
+    }
+    out = folder / "wrench.json"
+    done = run_cli("calibrate-wrench", "--from", str(logs["fit"]), "--held-out", str(logs["held_out"]),
+                   "--out", str(out))  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    return logs | {"calibration": out}
+
+
+def test_a_bound_that_holds_is_said_and_exits_0(fitted: dict[str, Path], tmp_path: Path) -> None:
+    """On another log of the same arm: bound_held true, the file's bounds by name, the samples outside their regime
+    counted, the summary's figures kept, one verdict line, exit 0."""
+    report = tmp_path / "check.json"
+    done = run_cli("calibrate-wrench", "--check", str(fitted["calibration"]), "--from", str(fitted["same_arm"]),
+                   "--json", str(report))  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    figures = json.loads(report.read_text())
+    calibration = json.loads(fitted["calibration"].read_text())
+    assert figures["bound_held"] is True
+    assert figures["bound_n"] == {
+        "error_bound_n": calibration["error_bound_n"],
+        "error_bound_with_acceleration_n": calibration["error_bound_with_acceleration_n"],
+    }
+    for name in figures["bound_n"]:
+        inside, outside = figures["regime_samples"][name], figures["outside_regime_samples"][name]
+        assert inside > 0 and inside + outside == figures["samples"]
+        assert figures["max_in_regime_n"][name] <= figures["bound_n"][name]
+    for key in ("rms_before_n", "max_before_n", "rms_after_n", "max_after_n", "by_depth", "by_speed"):
+        assert key in figures
+    assert [line for line in done.stdout.splitlines() if line.startswith("bound held: ")], done.stdout
+
+
+def test_a_bound_the_log_exceeds_is_said_and_exits_1(fitted: dict[str, Path], tmp_path: Path) -> None:
+    """On a log whose efforts the calibration does not explain: bound_held false, the exceeding samples counted,
+    BOUND EXCEEDED in one line, exit 1; the figures are still written."""
+    report = tmp_path / "check.json"
+    done = run_cli("calibrate-wrench", "--check", str(fitted["calibration"]), "--from", str(fitted["other_arm"]),
+                   "--json", str(report))  # fmt: skip
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "Traceback" not in done.stderr
+    figures = json.loads(report.read_text())
+    assert figures["bound_held"] is False
+    assert figures["exceeding_samples"]["error_bound_with_acceleration_n"] > 0
+    line = next(line for line in done.stdout.splitlines() if line.startswith("BOUND EXCEEDED"))
+    assert "error_bound_with_acceleration_n" in line and "above it" in line
+
+
+def test_the_written_bounds_are_never_below_the_held_out_log_or_the_floor(fitted: dict[str, Path]) -> None:
+    """The file's bounds cover what its held-out log showed in each bound's regime, and at least 0.5 N."""
+    calibration = json.loads(fitted["calibration"].read_text())
+    assert calibration["error_bound_with_acceleration_n"] >= max(calibration["max_after_retraction_speed_n"], 0.5)
+    assert calibration["error_bound_n"] >= max(
+        calibration["max_after_without_acceleration_n"], calibration["max_after_n"], 0.5
+    )

@@ -1,0 +1,194 @@
+"""Hostile joint logs and calibration files through the real command line: one table, one row per input.
+
+Every row runs ``python -m tissue_retract ...`` in a fresh interpreter (``calibrate-wrench`` and ``bench sensing``,
+which share the log readers and checks), as a careless or hostile user would type it, its address space bounded
+(``RLIMIT_AS``) where the defect was memory. A refused row must exit non-zero with a message that names what is
+wrong, print no traceback, and leave no calibration behind; a row that must succeed (a long log, within its
+memory) must exit 0 and write it. The next reader or check is covered by adding a row.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+from arm_logs import arm_bag, arm_csv
+
+#: The address space of a row's child where the defect was memory: the interpreter with numpy, scipy, Pinocchio
+#: and rosbags loaded takes about 1 GB of it (most of it mapped, not resident); a fit of the long log below took
+#: more than 1.5 GB more before its regressor was streamed.
+MEMORY_BOUND_BYTES = 2 * 1024**3
+#: Samples of the long log: 3.3 minutes at 100 Hz (an hour is 360,000).
+LONG_SAMPLES = 20_000
+
+
+@dataclass
+class Row:
+    """One hostile input: the arguments after ``tissue-retract`` (made in the row's folder), the words the
+    message must contain, whether the command must succeed, and its memory bound."""
+
+    name: str
+    argv: Callable[[Path], list[str]]
+    expect: tuple[str, ...]
+    succeeds: bool = False
+    memory_bytes: int | None = None
+    timeout_s: float = 600.0
+    outcome: dict[str, object] = field(default_factory=dict)
+
+
+def _edited(edit: Callable[[np.ndarray, np.ndarray, np.ndarray], None], samples: int = 1500) -> Callable[[Path], Path]:
+    """A bag of the arm's log with ``edit(q, qd, effort)`` applied."""
+    return lambda folder: arm_bag(folder / "log", samples, 0.0, edit=edit)
+
+
+def _zero_efforts(q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+    effort[:] = 0.0
+
+
+def _insertion_1e6(q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+    q[:, 2] = 1e6
+
+
+def _yaw_100_pitch_minus_50(q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+    q[:, 0], q[:, 1] = 100.0, -50.0
+
+
+def _efforts_1e200(q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+    effort *= 1e200
+
+
+def _good(folder: Path) -> Path:
+    return arm_bag(folder / "good", 1500, 1.0)
+
+
+def _zero_bound_file(folder: Path) -> Path:
+    """A calibration as an exact console's log made it before: every bound and error 0 N."""
+    path = folder / "zero.json"
+    figures = ("error_bound_n", "error_bound_with_acceleration_n", "rms_before_n", "max_before_n", "rms_after_n")
+    data = {"kind": "wrench_calibration", "arm": "PSM1", "columns": [320], "parameters": [0.0], "samples": 1000}
+    data |= dict.fromkeys((*figures, "max_after_n"), 0.0) | {"sensing": "logs: rosbag2", "console": "unknown"}
+    path.write_text(json.dumps(data))
+    return path
+
+
+def _symlink_to_dev_zero(folder: Path) -> Path:
+    path = folder / "zero.csv"
+    path.symlink_to("/dev/zero")
+    return path
+
+
+def _fifo(folder: Path) -> Path:
+    path = folder / "fifo.csv"
+    os.mkfifo(path)
+    return path
+
+
+def _calibrate(log: Callable[[Path], Path]) -> Callable[[Path], list[str]]:
+    return lambda folder: ["calibrate-wrench", "--from", str(log(folder)), "--out", str(folder / "out.json")]
+
+
+def _bench(log: Callable[[Path], Path], calibration: Callable[[Path], Path] | None = None) -> Callable[[Path], list]:
+    def argv(folder: Path) -> list[str]:
+        args = ["bench", "sensing", "--draws", "1", "--from", str(log(folder)), "--json", str(folder / "out.json")]
+        return args + (["--calibration", str(calibration(folder))] if calibration is not None else [])
+
+    return argv
+
+
+ROWS = [
+    # An exact console's log, or one no PSM gives: refused before anything is fitted, nothing written.
+    Row("calibrate-zero-efforts", _calibrate(_edited(_zero_efforts)), ("every effort in this log is 0", "exact")),
+    Row("calibrate-insertion-1e6", _calibrate(_edited(_insertion_1e6)), ("insertion is 1e+06 m", "range")),
+    Row("calibrate-yaw-100-rad", _calibrate(_edited(_yaw_100_pitch_minus_50)), ("yaw is 100 rad", "range")),
+    Row("calibrate-efforts-x1e200", _calibrate(_edited(_efforts_1e200)), ("efforts of at most 100", "yaw")),
+    Row("calibrate-10-samples", _calibrate(_edited(lambda *_: None, 10)), ("samples to filter and fit", "has 10")),
+    Row("calibrate-15-samples", _calibrate(_edited(lambda *_: None, 15)), ("samples to filter and fit", "has 15")),
+    # Files a log reader must not open: a device never ends, a FIFO blocks.
+    Row(
+        "calibrate-csv-dev-zero",
+        _calibrate(_symlink_to_dev_zero),
+        ("--from", "regular file"),
+        memory_bytes=MEMORY_BOUND_BYTES,
+    ),
+    Row("calibrate-csv-fifo", _calibrate(_fifo), ("--from", "regular file"), timeout_s=180.0),
+    # A calibration that says the force is exact: refused by a check as well as by a deploy.
+    Row(
+        "check-zero-bound-file",
+        lambda folder: ["calibrate-wrench", "--check", str(_zero_bound_file(folder)), "--from", str(_good(folder))],
+        ("error_bound_n of at least 0.5 N", "this file has 0 N"),
+    ),
+    # bench sensing shares the readers and the checks.
+    Row("bench-sensing-10-samples", _bench(_edited(lambda *_: None, 10)), ("at least 60 samples",)),
+    Row("bench-sensing-efforts-x1e200", _bench(_edited(_efforts_1e200)), ("efforts of at most 100",)),
+    Row("bench-sensing-zero-bound-file", _bench(_good, _zero_bound_file), ("error_bound_n of at least 0.5 N",)),
+    # A long log fits within a bounded memory: the regressor is streamed, not held.
+    Row(
+        "calibrate-long-log-bounded-memory",
+        _calibrate(lambda folder: arm_bag(folder / "long", LONG_SAMPLES, 0.0)),
+        ("written to",),
+        succeeds=True,
+        memory_bytes=MEMORY_BOUND_BYTES,
+        timeout_s=1800.0,
+    ),
+    Row(
+        "calibrate-csv-log",
+        _calibrate(lambda folder: arm_csv(folder / "arm.csv", 3000, 0.0)),
+        ("written to",),
+        succeeds=True,
+    ),
+]
+
+
+def _limit(memory_bytes: int | None) -> Callable[[], None] | None:
+    if memory_bytes is None:
+        return None
+    return lambda: resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+
+
+def _run(row: Row, folder: Path) -> Row:
+    folder.mkdir()
+    argv = row.argv(folder)
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")  # one BLAS thread: its buffers in the bound
+    try:
+        done = subprocess.run(
+            [sys.executable, "-m", "tissue_retract", *argv],
+            capture_output=True,
+            text=True,
+            timeout=row.timeout_s,
+            env=env,
+            preexec_fn=_limit(row.memory_bytes),
+            check=False,
+        )
+        returncode, text = done.returncode, done.stdout + done.stderr
+    except subprocess.TimeoutExpired as e:
+        returncode, text = None, f"no answer in {row.timeout_s:g} s: {e.stdout!r} {e.stderr!r}"
+    written = (folder / "out.json").exists()
+    ok = returncode == 0 and written if row.succeeds else returncode not in (0, None) and not written
+    row.outcome = {
+        "ok": ok and "Traceback" not in text and all(word in text for word in row.expect),
+        "returncode": returncode,
+        "written": written,
+        "text": text[-2000:],
+    }
+    return row
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)  # a hang guard for a loaded machine (the FIFO row of a reader that blocks)
+@pytest.mark.parametrize("row", ROWS, ids=[row.name for row in ROWS])
+def test_a_hostile_log_or_calibration_gets_a_named_error_and_writes_nothing(tmp_path: Path, row: Row) -> None:
+    """Each row: refused by name with a non-zero exit, no traceback and no file; or, a long log, fitted within its
+    memory bound."""
+    done = _run(row, tmp_path / row.name)
+    assert done.outcome["ok"], (
+        f"{row.name}: exit {done.outcome['returncode']}, wrote {done.outcome['written']}, expected "
+        f"{'success' if row.succeeds else 'a named refusal'} with {row.expect}\n{done.outcome['text']}"
+    )
