@@ -44,6 +44,7 @@ from hardware_if.wrench.fit import (
 )
 from hardware_if.wrench.joint_logs import read_joint_log
 from psm_control.errors import ConfigurationError
+from psm_control.inputs import check_output_path
 from psm_control.robot import PsmModel
 from sim.force_sensing import ArmResidual, ForceSensor, sensing_params
 from sim.identified_arm import ARM_FILES, IdentifiedArm, identified_arm
@@ -246,6 +247,10 @@ def _print(title: str, result: dict[str, Any]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Measure and print."""
+    inputs = (*(args.logs or ()), *(args.held_out or ()), args.calibration)
+    for field, output in (("--write-arm", args.write_arm), ("--json", args.json)):
+        if output is not None:  # checked as parsed; here against the logs it reads
+            check_output_path(output, field, inputs)
     if args.write_arm:
         arm, paths = _write_arm(args)
     else:
