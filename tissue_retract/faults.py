@@ -42,6 +42,7 @@ from hardware_if.recording.replay import load_recording, summarize_recording
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmModel
 from sim.expert import ScriptedExpert
+from sim.sweep.stopping import end_with_parent
 from tissue_retract.fault_setups import MOVED_OFFSET_RAD, move_arm_off_start, small_filesystem, wait_until_served
 
 __all__ = [
@@ -490,7 +491,17 @@ def _child_env(domain_id: int) -> dict[str, str]:
 
 
 def _start(command: list[str], env: dict[str, str]) -> subprocess.Popen[str]:
-    return subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # In a process group of its own and bound to this process (sim.sweep.stopping): the runner stops it,
+    # and a runner killed outright leaves no console serving the domain.
+    return subprocess.Popen(
+        command,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        process_group=0,
+        preexec_fn=end_with_parent(),
+    )
 
 
 def _stop(process: subprocess.Popen[str], timeout_s: float = 30.0) -> None:
@@ -836,7 +847,13 @@ def _ready_arm(env: dict[str, str], domain_id: int, guard_s: float) -> None:
     """Enable, home and move the simulated arm to the start with ``tissue-retract ready-arm`` (a dry run does not)."""
     command = [sys.executable, "-m", "tissue_retract", "ready-arm", "--domain-id", str(domain_id)]
     done = subprocess.run(
-        [*command, "--wait", f"{guard_s:g}"], env=env, capture_output=True, text=True, timeout=guard_s, check=False
+        [*command, "--wait", f"{guard_s:g}"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=guard_s,
+        check=False,
+        preexec_fn=end_with_parent(),
     )
     if done.returncode != 0:
         raise RuntimeError(f"ready-arm failed ({done.returncode}): {done.stderr.strip()}")
