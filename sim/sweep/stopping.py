@@ -182,19 +182,19 @@ class ChildProcesses:
         folder_prefix: Make a temporary folder with this prefix (:attr:`folder`), removed last.
     """
 
-    @property
-    def folder(self) -> Path:
-        """The temporary folder (with ``folder_prefix``, inside the block)."""
-        if self._folder is None:
-            raise RuntimeError(f"{self.command}: no temporary folder (folder_prefix) was asked for")
-        return self._folder
-
     def __init__(self, command: str, *, folder_prefix: str | None = None) -> None:
         self.command = command
         self._folder_prefix = folder_prefix
         self._temporary: tempfile.TemporaryDirectory[str] | None = None
         self._folder: Path | None = None
         self._running: list[tuple[str, subprocess.Popen[Any]]] = []
+
+    @property
+    def folder(self) -> Path:
+        """The temporary folder (with ``folder_prefix``, inside the block)."""
+        if self._folder is None:
+            raise RuntimeError(f"{self.command}: no temporary folder (folder_prefix) was asked for")
+        return self._folder
 
     def __enter__(self) -> ChildProcesses:
         if self._folder_prefix is not None:
@@ -272,17 +272,18 @@ class ChildProcesses:
 
 def _ended(process: subprocess.Popen[Any]) -> tuple[Any, Any]:
     """Wait for a signalled child, reading what is left of its output (a child blocked on a full pipe never
-    ends); kill it and its process group after :data:`CHILD_STOP_S`."""
+    ends); kill it and its process group after :data:`CHILD_STOP_S`. Its output, as ``communicate`` gives it."""
     try:
         return process.communicate(timeout=CHILD_STOP_S)
     except subprocess.TimeoutExpired:
-        pass
-    except ValueError:  # its pipes were closed by whoever read them: wait without them
-        with contextlib.suppress(subprocess.TimeoutExpired):
-            process.wait(timeout=CHILD_STOP_S)
-    if process.poll() is None:
         _kill_group(process)
-    return None, None
+        return process.communicate()  # the rest, up to the kill
+    except ValueError:  # its pipes were closed by whoever read them: wait without them
+        try:
+            process.wait(timeout=CHILD_STOP_S)
+        except subprocess.TimeoutExpired:
+            _kill_group(process)
+        return None, None
 
 
 def _kill_group(process: subprocess.Popen[Any]) -> None:
