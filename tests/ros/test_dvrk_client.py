@@ -61,9 +61,10 @@ def _finish(process: Process, timeout_s: float) -> str:
 
 
 def test_client_api_against_sim_dvrk(kinematic_sim: int) -> None:
-    """check_connections passes; reads are fresh; move/jaw waits end on time; hold/free/effort/FK/IK are served."""
+    """check_connections passes; reads are fresh; waits end with their moves; servo streams end at their goals."""
     client = run_client(SCRIPTS_HERE / "dvrk_client_checks.py", kinematic_sim, "PSM1")
     output = _finish(client, 240.0)
+    print(output)  # every check's line with its details (times here and on the console), for -rP
     checks = dict(re.findall(r"^CHECK (\S+) (ok|FAIL)", output, flags=re.MULTILINE))
     failed = [name for name, result in checks.items() if result != "ok"]
     assert not failed and "FAILED 0" in output, output
@@ -72,7 +73,10 @@ def test_client_api_against_sim_dvrk(kinematic_sim: int) -> None:
         "move_jp_wait",
         "jaw_open",
         "jaw_close",
+        "servo_cp_stream",
         "hold",
+        "settings",
+        "trajectory_ratio_slows",
         "servo_jf",
         "forward_kinematics",
         "inverse_kinematics",
