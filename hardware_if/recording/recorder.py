@@ -23,8 +23,8 @@ the force in 3-D; readers of the JSON channels skip these.
 
 A recording survives a crash: the writer ends its chunk and flushes the file at least every
 :data:`FLUSH_PERIOD_S` of wall time (and at every episode end and hold), so a SIGKILL loses at most about
-the last second. :func:`read_recording` reads such a file, which lacks its summary and footer, with a
-stream reader, and says so (:class:`RecordingRead`).
+the last second. :func:`read_recording` reads such a file, which lacks its summary and footer, record by
+record (:mod:`hardware_if.recording.reader`, within stated limits), and says so (:class:`RecordingRead`).
 
 A file that cannot be written (a full disk, a folder that vanishes or turns read-only, any write error)
 raises :class:`~hardware_if.recording.checked_file.RecordingError`, a hold naming the file and the error, at once
@@ -39,19 +39,16 @@ import json
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from struct import error as struct_error
 from types import TracebackType
 from typing import Any
 
 import numpy as np
 from mcap.data_stream import RecordBuilder
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
-from mcap.records import Channel, Footer, Message
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Message
 from mcap.writer import Writer
 
 from hardware_if.recording.checked_file import CheckedFile, RecordingError, describe_os_error
+from hardware_if.recording.schema import RecordingMessages
 from psm_control.outputs import special_file_kind
 from sim.scene_stream import LOG_TOPIC, SceneSink, log_message
 
@@ -271,38 +268,27 @@ class Recorder:
 class RecordingRead:
     """The messages of a recording, read once: iterate for ``(topic, log_time_s, payload)`` in log-time order.
 
+    Read and checked by :class:`~hardware_if.recording.schema.RecordingMessages`, within the limits of
+    :mod:`hardware_if.recording.reader`. Every payload is kept: ``replay`` reads long recordings into
+    arrays instead (:func:`hardware_if.recording.replay.load_recording`).
+
     Attributes:
         truncated: True when the file has no footer (the writer did not finish: a crash or a kill);
-            the messages are then those of every complete chunk, read with a stream reader.
+            the messages are then those of every complete record.
+
+    Raises:
+        RecordingFileError: The file is not a recording within the reader's limits, or a message is not
+            what its channel holds (named).
     """
 
     def __init__(self, path: str | Path) -> None:
-        self.truncated = False
-        self.messages: list[tuple[str, float, dict[str, Any]]] = []
-        with Path(path).open("rb") as f:
-            try:
-                reader = make_reader(f)
-                for _, channel, message in reader.iter_messages(topics=list(CHANNELS), log_time_order=True):
-                    self.messages.append((channel.topic, message.log_time * 1e-9, json.loads(message.data)))
-                return
-            except (McapError, EOFError, ValueError, struct_error):
-                self.messages.clear()
-            self.truncated = True
-            f.seek(0)
-            channels: dict[int, str] = {}
-            rows: list[tuple[int, str, dict[str, Any]]] = []
-            try:
-                for record in StreamReader(f, skip_magic=False).records:
-                    if isinstance(record, Channel) and record.topic in CHANNELS:  # the JSON channels
-                        channels[record.id] = record.topic
-                    elif isinstance(record, Message) and record.channel_id in channels:
-                        rows.append((record.log_time, channels[record.channel_id], json.loads(record.data)))
-                    elif isinstance(record, Footer):
-                        self.truncated = False
-            except (McapError, EOFError, ValueError, struct_error):
-                pass  # the torn record at the end: everything before it is kept
-            rows.sort(key=lambda row: row[0])
-            self.messages = [(topic, t * 1e-9, payload) for t, topic, payload in rows]
+        read = RecordingMessages(path)
+        rows = [(t_ns, topic, payload) for topic, _, t_ns, payload in read]
+        rows.sort(key=lambda row: row[0])
+        self.truncated = read.truncated
+        self.messages: list[tuple[str, float, dict[str, Any]]] = [
+            (topic, t * 1e-9, payload) for t, topic, payload in rows
+        ]
 
     def __iter__(self) -> Iterator[tuple[str, float, dict[str, Any]]]:
         return iter(self.messages)

@@ -27,10 +27,12 @@ from mcap.data_stream import RecordBuilder
 from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Message
 from mcap.writer import Writer
 
-from hardware_if.recording.reader import MAX_CHUNK_BYTES, MAX_RECORDS
-
 #: The children's address space [bytes]: ``replay --plot`` of a real recording runs in less than 1 GiB.
 MEMORY_LIMIT_BYTES = 2 * 1024**3
+#: The reader's limits (:mod:`hardware_if.recording.reader`), written out so the rows build the same files
+#: whichever version of the reader is installed.
+MAX_CHUNK_BYTES = 64 * 1024 * 1024
+MAX_RECORDS = 4_000_000
 _MAGIC = b"\x89MCAP0\r\n"
 _TOPICS = ("/deploy/meta", "/deploy/measured", "/deploy/command", "/deploy/action", "/deploy/event", "/deploy/report")
 
@@ -245,6 +247,13 @@ def _argv(command: str, path: Path, out: Path) -> tuple[str, ...]:
     if command == "plot":
         return ("replay", str(path), "--plot", str(out))
     return ("calibrate-wrench", "--from", str(path), "--out", str(out))
+
+
+def test_the_rows_use_the_readers_limits() -> None:
+    """The limits the rows are built against are the reader's."""
+    from hardware_if.recording import reader
+
+    assert (reader.MAX_CHUNK_BYTES, reader.MAX_RECORDS) == (MAX_CHUNK_BYTES, MAX_RECORDS)
 
 
 def test_every_row_names_a_command() -> None:

@@ -22,7 +22,7 @@ from hardware_if.recording.checked_file import RecordingError
 from hardware_if.recording.recorder import Recorder, read_recording
 from tissue_retract.fault_setups import small_filesystem
 
-PAYLOAD = {"q": list(range(40)), "text": "x" * 200}
+PAYLOAD = {"q": [0.25] * 6, "force_n": [0.0, 0.0, 0.5], "text": "x" * 300}  # a measurement's fields, about as long
 #: A tmpfs gives a file room a page at a time.
 _PAGE_BYTES = 4096
 
