@@ -14,6 +14,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+import rclpy
 from domains import client_domain_id
 from dvrk_client import SCRIPTS_HERE, Process, client_dir, missing, run_client, start_sim
 
@@ -23,6 +24,21 @@ SCRIPTS = {
     "dvrk_arm_test.py": ("PSM2", None),
     "dvrk_psm_test.py": ("PSM3", "\n" * 10),
 }
+
+
+#: What ``dvrk.psm(ral, 'PSM1')`` connects to, under ``/PSM1/`` (its ``check_connections()`` waits on the
+#: topics): what the console publishes, what it subscribes to, the services it offers.
+CLIENT_READS = (
+    "measured_js", "measured_cp", "measured_cv", "setpoint_js", "setpoint_cp", "local/measured_cp",
+    "local/setpoint_cp", "body/measured_cf", "spatial/measured_cf", "body/jacobian", "spatial/jacobian",
+    "jaw/measured_js", "jaw/setpoint_js", "operating_state", "error", "warning", "status", "trajectory_j/ratio",
+)  # fmt: skip
+CLIENT_COMMANDS = (
+    "servo_jp", "servo_jr", "servo_cp", "servo_jf", "move_jp", "move_jr", "move_cp", "hold", "free",
+    "body/servo_cf", "spatial/servo_cf", "jaw/servo_jp", "jaw/move_jp", "jaw/servo_jf", "state_command",
+    "trajectory_j/set_ratio", "use_gravity_compensation", "body/set_cf_orientation_absolute", "emulate_tool_present",
+)  # fmt: skip
+CLIENT_SERVICES = ("forward_kinematics", "local/forward_kinematics", "inverse_kinematics")
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -58,6 +74,26 @@ def _finish(process: Process, timeout_s: float) -> str:
         process.stop()
         pytest.fail(f"did not finish within {timeout_s} s:\n{process.output()}")
     return process.output()
+
+
+def test_console_serves_every_endpoint_of_the_client_once_constructed() -> None:
+    """The console has every topic and service the client connects to once constructed, before its start-up line."""
+    from hardware_if.console.sim_dvrk import SimulatedPsm  # the ros extra
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = SimulatedPsm("PSM1", context=context)
+        name, namespace = node.get_name(), node.get_namespace()
+        published = {topic for topic, _ in node.get_publisher_names_and_types_by_node(name, namespace)}
+        subscribed = {topic for topic, _ in node.get_subscriber_names_and_types_by_node(name, namespace)}
+        services = {service for service, _ in node.get_service_names_and_types_by_node(name, namespace)}
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert {f"/PSM1/{t}" for t in CLIENT_READS} <= published, sorted(published)
+    assert {f"/PSM1/{t}" for t in CLIENT_COMMANDS} <= subscribed, sorted(subscribed)
+    assert {f"/PSM1/{s}" for s in CLIENT_SERVICES} <= services, sorted(services)
 
 
 def test_client_api_against_sim_dvrk(kinematic_sim: int) -> None:
