@@ -507,3 +507,21 @@ def test_calibrate_wrench_record_without_room_is_refused_before_the_arm_moves(tm
     assert "could not write --record 'bag': File too large (EFBIG); a bag of 4000 samples takes about" in text
     assert "excitation" not in text and "Traceback" not in text
     assert os.listdir(tmp_path) == []
+
+
+def test_deploy_force_replaces_an_earlier_recording(tmp_path: Path) -> None:
+    """deploy --record on an earlier recording with --force: the run goes ahead and the file is its recording."""
+    record = tmp_path / "run.mcap"
+    record.write_bytes(b"an earlier run's recording\n")
+    argv = ("deploy", *SWEEP[:4], "--target", "sim", "--record", record, "--force")
+    done = subprocess.run(
+        [sys.executable, "-m", "tissue_retract", *map(str, argv)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+        cwd=tmp_path,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert record.read_bytes().startswith(b"\x89MCAP0\r\n")
+    assert sorted(os.listdir(tmp_path)) == ["run.mcap"]
