@@ -152,14 +152,28 @@ class McapMessages:
         path: The file.
         topics: The topics whose messages are wanted (None: every topic).
         field: How the command names the file in errors (``recording``, ``--from``).
+        check_index: Also check that the summary a seeking reader follows (the footer at the file's end, its
+            chunk indexes) points at the records read here, so that reader decompresses only the chunks
+            checked here (for ``rosbags``, which reads a bag through its index).
 
     Raises:
         RecordingFileError: (while iterating) Not a regular file within :data:`MAX_FILE_BYTES`, not MCAP, a
             malformed record, a compression other than none, zstd or lz4, or a limit passed.
     """
 
-    def __init__(self, path: str | Path, topics: Collection[str] | None = None, *, field: str = "recording") -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        topics: Collection[str] | None = None,
+        *,
+        field: str = "recording",
+        check_index: bool = False,
+    ) -> None:
         self.path = Path(path)
+        self.check_index = check_index
+        self._chunk_at: dict[int, tuple[str, int, int]] = {}  # checked chunks: offset -> compression and sizes
+        self._summary_at = 0  # where the summary section starts (the record after the data end), 0: none yet
+        self._summary_offsets_at = 0  # the first summary offset record
         self.topics = None if topics is None else frozenset(topics)
         self.field = field
         #: True when the file ends without its footer (the writer did not finish: a crash or a kill).
@@ -185,6 +199,10 @@ class McapMessages:
         try:
             with self.path.open("rb") as f:
                 yield from self._records(f, size)
+                if self.check_index and self.truncated and size >= 2 * len(_MAGIC):
+                    f.seek(size - len(_MAGIC))
+                    if f.read(len(_MAGIC)) == _MAGIC:  # a footer at the end that a seeking reader would follow
+                        raise self._error("an MCAP file whose records reach its footer; they end before it")
         except OSError as e:
             raise self._error(f"a readable MCAP file ({e.strerror or e})") from e
 
@@ -216,9 +234,13 @@ class McapMessages:
             if start == len(_MAGIC) and opcode != Opcode.HEADER:
                 raise self._error(f"an MCAP file that starts with a header record (opcode {opcode:#04x} found)")
             if opcode == Opcode.FOOTER:
+                if self.check_index:
+                    self._check_footer(body, start, offset, size, read(len(_MAGIC)))
                 return
             if opcode == Opcode.CHUNK:
                 yield from self._chunk(body, start)
+            elif self.check_index and opcode in (Opcode.DATA_END, Opcode.CHUNK_INDEX, Opcode.SUMMARY_OFFSET):
+                self._check_summary_record(opcode, body, start, offset)
             else:
                 yield from self._record(opcode, body, start)
 
@@ -252,6 +274,8 @@ class McapMessages:
                 f"{chunk.uncompressed_size} bytes and holds {held}"
             )
         self._uncompressed += len(data)
+        if self.check_index:
+            self._chunk_at[start] = (chunk.compression, len(chunk.data), chunk.uncompressed_size)
         view = memoryview(data)
         offset = 0
         while offset < len(data):
@@ -264,6 +288,43 @@ class McapMessages:
             self._count()
             yield from self._record(opcode, view[offset : offset + length], start)
             offset += length
+
+    def _check_summary_record(self, opcode: int, body: bytes, start: int, end: int) -> None:
+        """Where the summary starts, and that each chunk index names a chunk checked here, as it was."""
+        if opcode == Opcode.DATA_END:
+            self._summary_at = end
+        elif opcode == Opcode.SUMMARY_OFFSET:
+            self._summary_offsets_at = self._summary_offsets_at or start
+        else:
+            try:  # ChunkIndex's fields by hand: its map of message index offsets is skipped, not built
+                chunk_at = struct.unpack_from("<Q", body, 16)[0]
+                (skip,) = struct.unpack_from("<I", body, 32)
+                (length,) = struct.unpack_from("<I", body, 44 + skip)
+                compression = bytes(body[48 + skip : 48 + skip + length]).decode()
+                compressed, uncompressed = struct.unpack_from("<QQ", body, 48 + skip + length)
+            except (struct.error, UnicodeDecodeError) as e:
+                raise self._error(f"well-formed records; the chunk index at byte {start} is not ({e})") from e
+            if self._chunk_at.get(chunk_at) != (compression, compressed, uncompressed):
+                raise self._error(
+                    f"an index that points at the file's own chunks; the chunk index at byte {start} names a "
+                    f"chunk at byte {chunk_at} that is not there as it says"
+                )
+
+    def _check_footer(self, body: bytes, start: int, end: int, size: int, magic: bytes) -> None:
+        """The footer a seeking reader finds at the file's end is this one, and points at this summary."""
+        try:
+            summary_at, offsets_at = struct.unpack_from("<QQ", body)
+        except struct.error as e:
+            raise self._error(f"well-formed records; the footer at byte {start} is not ({e})") from e
+        if end + len(_MAGIC) != size or magic != _MAGIC:
+            raise self._error(
+                f"an MCAP file that ends with its footer; {size - end} bytes follow the one at byte {start}"
+            )
+        if summary_at not in (0, self._summary_at) or offsets_at not in (0, self._summary_offsets_at):
+            raise self._error(
+                f"a footer that points at the file's own summary; the one at byte {start} points at bytes "
+                f"{summary_at} and {offsets_at}"
+            )
 
     def _record(self, opcode: int, body: bytes | memoryview, start: int) -> Iterator[McapMessage]:
         if opcode == Opcode.MESSAGE:

@@ -58,7 +58,7 @@ def check_bag_files(path: str | Path, *, field: str = "--from") -> None:
     path = Path(path)
     for storage in _storage_files(path, field) if path.is_dir() else [path]:
         if storage.suffix.lower() == ".mcap":
-            for _ in McapMessages(storage, (), field=field):  # no topic wanted: every record checked, none kept
+            for _ in McapMessages(storage, (), field=field, check_index=True):  # every record checked, none kept
                 pass
         else:
             check_regular_file(storage, field, MAX_FILE_BYTES)

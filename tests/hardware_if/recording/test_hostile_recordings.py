@@ -17,14 +17,15 @@ import subprocess
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from io import BytesIO
 from pathlib import Path
 from typing import Any
 
 import lz4.frame  # type: ignore[import-untyped]
 import pytest
 import zstandard
-from mcap.data_stream import RecordBuilder
-from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Message
+from mcap.data_stream import ReadDataStream, RecordBuilder
+from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, Schema
 from mcap.writer import Writer
 
 #: The children's address space [bytes]: ``replay --plot`` of a real recording runs in less than 1 GiB.
@@ -161,6 +162,30 @@ def _count_bomb(path: Path) -> Path:
     return _mcap(path, *[chunk] * (MAX_RECORDS // per_chunk + 1))
 
 
+def _bag_with_hidden_chunk(path: Path) -> Path:
+    """A ros2 bag whose chunk index points at a bomb hidden inside a record of an unknown kind, which a sequential
+    reader skips and a reader that follows the index (rosbags) decompresses."""
+    builder = RecordBuilder()
+    Header(profile="ros2", library="rosbag2").write(builder)
+    head = _MAGIC + builder.end()
+    bomb = _empty_messages_chunk(10_000_000, "zstd", topic="/PSM1/measured_js")
+    hidden = bytes([0x80]) + len(bomb).to_bytes(8, "little") + bomb  # opcode 0x80: a user record, skipped
+    DataEnd(data_section_crc=0).write(builder)
+    data_end = builder.end()
+    chunk = Chunk.read(ReadDataStream(BytesIO(bomb[9:])))
+    Schema(id=1, name="sensor_msgs/msg/JointState", encoding="ros2msg", data=b"").write(builder)
+    Channel(id=1, schema_id=1, topic="/PSM1/measured_js", message_encoding="cdr", metadata={}).write(builder)
+    ChunkIndex(
+        message_start_time=0, message_end_time=0, chunk_start_offset=len(head) + 9, chunk_length=len(bomb),
+        message_index_offsets={1: len(head) + 9 + len(bomb)}, message_index_length=31,  # one message on it, it says
+        compression="zstd", compressed_size=len(chunk.data),
+        uncompressed_size=chunk.uncompressed_size,
+    ).write(builder)  # fmt: skip
+    Footer(summary_start=len(head) + len(hidden) + len(data_end), summary_offset_start=0, summary_crc=0).write(builder)
+    path.write_bytes(head + hidden + data_end + builder.end() + _MAGIC)
+    return path
+
+
 def _compressed_bag(path: Path) -> Path:
     """A rosbag2 folder in rosbag2's file compression mode (its one storage file zstd-compressed)."""
     folder = path.with_suffix("")
@@ -225,6 +250,8 @@ ROWS = [
     Row("record-count-bomb", _count_bomb, (f"at most {MAX_RECORDS} records",)),
     Row("bag-zstd-bomb", _bomb(10_000_000, library="rosbag2", profile="ros2"),
         ("chunks of at most 67108864 bytes decompressed",), ("calibrate",)),
+    Row("bag-index-to-hidden-chunk", _bag_with_hidden_chunk, ("an index that points at the file's own chunks",),
+        ("calibrate",)),
     Row("bag-file-compression", _compressed_bag, ("rosbag2's file compression", "ros2 bag convert"), ("calibrate",)),
 ]  # fmt: skip
 
