@@ -36,7 +36,7 @@ import numpy as np
 
 import sim.envs
 from psm_control.errors import ConfigurationError
-from psm_control.outputs import write_atomic
+from psm_control.outputs import atomic_path, write_atomic
 from sim.robustness import TrainingRanges, parse_vary, training_ranges
 from sim.sweep.stopping import handling
 from tissue_retract.cli._camera import check_texture
@@ -167,12 +167,13 @@ def _keep(out: Path, state: Any, args: argparse.Namespace) -> str:
     # Not interrupted again while it writes: a second signal would lose what the first one keeps.
     with handling(_STOP_SIGNALS, lambda _signum, _frame: None):
         heldout = state.heldout
-        np.savez_compressed(
-            out / _HELDOUT,
-            images=heldout.images,
-            sites_camera_m=heldout.sites_camera_m,
-            named_camera_m=heldout.named_camera_m,
-        )
+        with atomic_path(out / _HELDOUT, "--out") as temporary:
+            np.savez_compressed(
+                temporary,
+                images=heldout.images,
+                sites_camera_m=heldout.sites_camera_m,
+                named_camera_m=heldout.named_camera_m,
+            )
         kept = f"kept {len(heldout)} held-out frames in {out / _HELDOUT}"
         if state.estimator is None or state.epochs == 0:
             return kept + " (stopped before training began: no model)"
@@ -202,4 +203,5 @@ def write_frames_picture(path: Path, estimator: Any, count: int = 8) -> None:
                 image[max(row - 1, 0) : row + 2, max(col - 1, 0) : col + 2] = colour
         tiles.append(image)
     rows = [np.concatenate(tiles[i : i + 4], axis=1) for i in range(0, count, 4)]
-    imageio.imwrite(path, np.concatenate(rows, axis=0))
+    with atomic_path(path, "--out") as temporary:
+        imageio.imwrite(temporary, np.concatenate(rows, axis=0))
