@@ -22,6 +22,8 @@ def pytest_configure(config: pytest.Config) -> None:
     (Ray's session files, libraries' scratch files). The path is short: Ray puts Unix sockets under it.
     The ROS domain ids of the workers are kept apart in ``tests/ros/domains.py``.
     """
+    if not config.pluginmanager.hasplugin("xdist"):  # -p no:xdist: its marker, which tests name, is still known
+        config.addinivalue_line("markers", "xdist_group(name): tests pytest-xdist sends to one worker")
     worker = os.environ.get("PYTEST_XDIST_WORKER")
     if worker is None:
         return
