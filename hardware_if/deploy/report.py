@@ -40,8 +40,9 @@ __all__ = [
 #: Exit status of a deploy that stopped because the deadman held the arm.
 EXIT_HOLD = 4
 #: Exit status of a deploy in which the force on the tissue certainly exceeded the limit: the true force in the
-#: simulation, a measured force beyond the limit plus the sensing's error bound on a dVRK. It comes before a
-#: hold's and a stop signal's: a run that did both ends with it (the report says both).
+#: simulation, a measured force beyond the limit plus the sensing's error bound on a dVRK. A run that also held
+#: or was stopped ends with that status instead (4, 128 + signal), so that each fault keeps its own; the
+#: report says the force either way.
 EXIT_FORCE_LIMIT = 3
 
 
@@ -72,13 +73,13 @@ class DeployReport:
 
     @property
     def exit_code(self) -> int:
-        """:data:`EXIT_FORCE_LIMIT` when the force limit was certainly exceeded, else 128 + signal on a stop
-        signal, :data:`EXIT_HOLD` on a hold, 0 when every episode ran to its end."""
-        if self.force_limit_exceeded:
-            return EXIT_FORCE_LIMIT
+        """128 + signal on a stop signal, :data:`EXIT_HOLD` on a hold, else :data:`EXIT_FORCE_LIMIT` when the force
+        limit was certainly exceeded, 0 when every episode ran to its end within it."""
         if self.interrupted:
             return 128 + int(signal.Signals[self.signal or "SIGINT"])
-        return EXIT_HOLD if self.fault else 0
+        if self.fault:
+            return EXIT_HOLD
+        return EXIT_FORCE_LIMIT if self.force_limit_exceeded else 0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (the recording's ``/deploy/report``)."""
@@ -116,10 +117,10 @@ class DeployReport:
             else ""
         )
         if self.force_limit_exceeded:
+            status = f"; exit status {EXIT_FORCE_LIMIT}" if self.exit_code == EXIT_FORCE_LIMIT else ""
             out.append(
                 f"  FORCE LIMIT {self.force_limit_n:g} N EXCEEDED{told} {self.force_limit_exceeded} x, "
-                f"{self.force_over_limit_s:.2f} s in all (events force_limit_exceeded in the recording; "
-                f"exit status {EXIT_FORCE_LIMIT})"
+                f"{self.force_over_limit_s:.2f} s in all (events force_limit_exceeded in the recording{status})"
             )
         elif self.episodes:
             out.append(f"  force limit {self.force_limit_n:g} N: never exceeded{told}")

@@ -27,8 +27,8 @@ the last verified command), the fault is recorded as a ``hold`` event with its r
 says ``HOLD: <reason>`` and the exit status is :data:`EXIT_HOLD`. SIGINT, SIGTERM and SIGHUP stop between
 two control ticks, close the recording and exit with 128 + the signal number (130, 143, 129). A run in
 which the force certainly exceeded the limit (the true force in the simulation; on a dVRK, the measured
-force beyond the limit plus the sensing's error bound) exits with :data:`EXIT_FORCE_LIMIT`, whatever else
-happened. Every run is recorded (:mod:`hardware_if.recording.recorder`).
+force beyond the limit plus the sensing's error bound) and that neither held nor was stopped exits with
+:data:`EXIT_FORCE_LIMIT`. Every run is recorded (:mod:`hardware_if.recording.recorder`).
 """
 
 import contextlib

@@ -35,7 +35,7 @@ the fault, prints ``HOLD: <reason>`` and exits with status 4.
 Ctrl-C (SIGINT), SIGTERM and SIGHUP stop between two control ticks and close the recording; the exit
 status is 128 + the signal: 130, 143, 129. A run in which the force certainly exceeded the limit (``FORCE
 LIMIT ... EXCEEDED``: the true force in the simulation, the measured force beyond the limit plus the
-sensing's error bound on a dVRK) exits with status 3, whatever else happened.
+sensing's error bound on a dVRK) exits with status 3, unless it held (4) or was stopped (128 + the signal).
 Every run is recorded to MCAP (``--record``, default ``runs/deploy-<time>.mcap``; see ``replay``; an existing
 recording is kept: the run is refused unless ``--force`` replaces it), with its
 3-D scene in Foxglove's schemas: the measured arm, the commanded arm (translucent blue; in a dry run, where

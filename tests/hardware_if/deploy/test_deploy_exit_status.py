@@ -28,8 +28,8 @@ tissue_stiffness_bound_n_per_m = 2.0
         ({"fault": "stale: measured_js 0.2 s old"}, EXIT_HOLD),
         ({"interrupted": True, "signal": "SIGTERM"}, 143),
         ({"force_limit_exceeded": 17}, 3),
-        ({"force_limit_exceeded": 1, "fault": "stale: measured_js 0.2 s old"}, 3),
-        ({"force_limit_exceeded": 2, "interrupted": True, "signal": "SIGINT"}, 3),
+        ({"force_limit_exceeded": 1, "fault": "stale: measured_js 0.2 s old"}, EXIT_HOLD),
+        ({"force_limit_exceeded": 2, "interrupted": True, "signal": "SIGINT"}, 130),
     ],
 )
 @pytest.mark.parametrize("target", ["dvrk", "sim"])
@@ -37,7 +37,8 @@ def test_a_force_certainly_over_the_limit_decides_the_exit_status(
     target: str, changes: dict[str, object], status: int
 ) -> None:
     """An excursion the report counts (beyond the sensing's error bound on a dVRK, the true force in the
-    simulation) exits with EXIT_FORCE_LIMIT, 3, before a hold's 4 and a signal's 128 + n; otherwise as before."""
+    simulation) exits with EXIT_FORCE_LIMIT, 3, where it would have exited 0; a hold keeps its 4 and a stop
+    signal its 128 + n."""
     report = DeployReport(target, False, Path("run.mcap"))
     for name, value in changes.items():
         setattr(report, name, value)
