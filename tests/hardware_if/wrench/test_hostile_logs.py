@@ -22,12 +22,12 @@ import numpy as np
 import pytest
 from arm_logs import arm_bag, arm_csv
 
-#: The address space of a row's child where the defect was memory: the interpreter with numpy, scipy, Pinocchio
-#: and rosbags loaded takes about 1 GB of it (most of it mapped, not resident); a fit of the long log below took
-#: more than 1.5 GB more before its regressor was streamed.
-MEMORY_BOUND_BYTES = 2 * 1024**3
-#: Samples of the long log: 3.3 minutes at 100 Hz (an hour is 360,000).
-LONG_SAMPLES = 20_000
+#: The address space of a row's child where the defect was memory (1.5 GiB): the interpreter with numpy, scipy,
+#: Pinocchio and rosbags loaded maps about 1 GB of it, most of it not resident; the fit of the long log below ran
+#: out of it (a 309 MiB regressor array) before its regressor was streamed.
+MEMORY_BOUND_BYTES = 3 * 1024**3 // 2
+#: Samples of the long log: 5 minutes at 100 Hz (an hour is 360,000).
+LONG_SAMPLES = 30_000
 
 
 @dataclass
