@@ -25,6 +25,7 @@ alone, which stops a retraction after ``(limit - held load) / stiffness bound`` 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -147,20 +148,32 @@ class ForceBound:
         """The jaws may hold tissue by the jaw alone: closed, or opened less than :data:`RELEASE_S` ago."""
         return not self.exact and self._grasped_at is not None and self._open_s < RELEASE_S
 
+    def at_limit(self, limit_n: float) -> ForceBound:
+        """The same bounds under another force limit [N] (a fresh episode)."""
+        return ForceBound(limit_n, self.error_n, self.stiffness_bound_n_per_m, self.held_load_bound_n, self.period_s)
+
     def travel_allowed_m(self) -> float:
         """How far the grasp point may travel from the grasp under the travel bound alone [m]."""
         return max(0.0, self.limit_n - self.held_load_bound_n) / self.stiffness_bound_n_per_m
 
 
-def sensing_warning(config: SafetyConfig, sensing: str, *, calibrated: bool = False) -> str:
+def sensing_warning(
+    config: SafetyConfig, sensing: str, *, calibrated: bool = False, limits_n: Sequence[float] | None = None
+) -> str:
     """The run's warning when its force limit is below what the sensing resolves ('' when it is not).
 
     Args:
         config: The run's safety configuration.
         sensing: What the force comes from, for the message (``dvrk``, a calibration file, ...).
         calibrated: The force is calibrated already (then calibrating is not what the message advises).
+        limits_n: The force limits a sweep runs (``tune-safety``'s grid) [N], in place of the configuration's
+            one; the warning names those below the sensing's error bound and the travel each allows.
     """
     bound = ForceBound.from_config(config)
+    if limits_n is not None and len(set(limits_n)) > 1:
+        return _limits_warning(bound, sorted(set(limits_n)), sensing, calibrated)
+    if limits_n is not None:
+        bound = bound.at_limit(next(iter(limits_n)))
     if bound.exact or bound.error_n < bound.limit_n:
         return ""
     return (
@@ -170,6 +183,23 @@ def sensing_warning(config: SafetyConfig, sensing: str, *, calibrated: bool = Fa
         f"{bound.stiffness_bound_n_per_m:g} N/m and loads the jaws by at most {bound.held_load_bound_n:.2f} N "
         f"when grasped: a retraction stops after {1000 * bound.travel_allowed_m():.1f} mm of travel. "
         f"What you can change: {'; '.join(_remedies(calibrated))}"
+    )
+
+
+def _limits_warning(bound: ForceBound, limits_n: list[float], sensing: str, calibrated: bool) -> str:
+    """:func:`sensing_warning` for a sweep over several force limits ('' when the sensing resolves them all)."""
+    below = [limit for limit in limits_n if not bound.exact and limit <= bound.error_n]
+    if not below:
+        return ""
+    travels = [f"{1000 * bound.at_limit(limit).travel_allowed_m():.1f} mm at {limit:.3g} N" for limit in below]
+    return (
+        f"WARNING: {len(below)} of {len(limits_n)} force limits swept ({', '.join(f'{v:.3g}' for v in below)} N) "
+        f"are below the force sensing's error bound {bound.error_n:.2f} N ({sensing}): under them the measured "
+        "force cannot tell the limit. Each is kept from the grasp point's travel since the grasp instead, assuming "
+        f"the held tissue is no stiffer than {bound.stiffness_bound_n_per_m:g} N/m and loads the jaws by at most "
+        f"{bound.held_load_bound_n:.2f} N when grasped: a retraction stops after {', '.join(travels)} of travel. "
+        f"They are swept and shown, and recommended only where the policy succeeds. What you can change: "
+        f"{'; '.join(_remedies(calibrated))}"
     )
 
 

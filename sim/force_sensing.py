@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from psm_control.errors import UnknownVariantError
+from psm_control.errors import ConfigurationError, UnknownVariantError
 from psm_control.robot import PsmConfiguration, PsmModel
 from safety.config import SafetyConfig
 from sim.identified_arm import IdentifiedArm, identified_arm
@@ -53,6 +53,7 @@ __all__ = [
     "ColouredNoise",
     "ForceSensor",
     "SensingParams",
+    "calibrated_sensing",
     "console_force",
     "error_bound_n",
     "sensing_params",
@@ -335,6 +336,24 @@ def error_bound_n(
     velocity = tuple(float(v) for v in config.velocity)
     acceleration = tuple(float(a) for a in config.acceleration)
     return _bound(params, velocity, acceleration, samples, seed)
+
+
+def calibrated_sensing(bound_n: float) -> SensingParams:
+    """A calibrated dVRK whose force is off by at most ``bound_n`` [N]: a calibration file's bound.
+
+    The ``dvrk-calibrated`` preset's errors (the held-out residual and the inertia of a tracking error), every
+    term scaled so that the preset's bound (:func:`error_bound_n`, 1.25 x the largest calibrated error on the
+    held-out real logs) becomes the file's: a robot's calibration, checked on its own held-out log, bounds the
+    error its arm leaves as the preset's bound bounds the identified arm's. The filter trusts the force to that
+    bound. The name stays ``dvrk-calibrated`` (the policies shipped for it are the ones to run).
+
+    Raises:
+        ConfigurationError: A bound that is not finite and positive.
+    """
+    if not (math.isfinite(bound_n) and bound_n > 0.0):
+        raise ConfigurationError("force sensing error bound", bound_n, "a finite bound > 0 N")
+    preset = SENSING_PRESETS["dvrk-calibrated"]
+    return preset.scaled(bound_n / error_bound_n(preset))
 
 
 #: The travel bound's stiffness over ``E t`` (:mod:`safety.force_bound`). Measured: the tasks' expert

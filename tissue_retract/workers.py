@@ -18,6 +18,7 @@ from safety.force_bound import sensing_warning
 from sim.disturbances import DisturbanceWrapper
 from sim.envs import make
 from sim.evaluation import check_start_inside_workspace, run_episode
+from sim.force_sensing import SensingParams, calibrated_sensing
 from sim.robustness import disturbances, episode_options
 from sim.stiffness_fifths import STIFFNESS_KEY
 from sim.tissue import TissueParams
@@ -32,6 +33,11 @@ TUNING_WORKER = f"{__name__}:tuning_episode"
 _CACHE: dict[tuple[Any, ...], Any] = {}
 
 
+def _sensing(force_sensing: str, calibrated_error_n: float | None) -> str | SensingParams:
+    """The preset, or with a calibration file's bound [N] a calibrated dVRK off by at most that much."""
+    return force_sensing if calibrated_error_n is None else calibrated_sensing(calibrated_error_n)
+
+
 def _environment(
     task: str,
     safety: bool,
@@ -40,8 +46,10 @@ def _environment(
     tissue_ranges: Mapping[str, Any] | None = None,
     perception: str | None = None,
     texture: str | None = None,
+    calibrated_error_n: float | None = None,
 ) -> Any:
-    """The worker's environment; ``perception``: ``camera[:MODEL]``; ``texture``: the flap's image file."""
+    """The worker's environment; ``perception``: ``camera[:MODEL]``; ``texture``: the flap's image file;
+    ``calibrated_error_n``: a calibration file's error bound [N] (the sensing is then a calibrated dVRK's)."""
     declared = {k: tuple(v) for k, v in (tissue_ranges or {}).items()}
     key = (
         "env",
@@ -52,11 +60,12 @@ def _environment(
         str(declared),
         perception,
         texture,
+        calibrated_error_n,
     )
     if key not in _CACHE:
         kwargs: dict[str, Any] = {
             "safety": safety,
-            "force_sensing": force_sensing,
+            "force_sensing": _sensing(force_sensing, calibrated_error_n),
             "randomization": declared,
             "tissue": TissueParams(texture_path=texture),
         }
@@ -77,8 +86,15 @@ def check_sweep_policy(
     allow_other_task: bool = False,
     force_sensing: str = "ideal",
     tissue_ranges: Mapping[str, Any] | None = None,
+    calibrated_error_n: float | None = None,
+    sensing_label: str | None = None,
+    force_limits_n: list[float] | None = None,
 ) -> str:
     """Before a sweep starts: the policy loads for the task and the start pose lies inside the workspace box.
+
+    ``calibrated_error_n`` is a calibration file's error bound [N] (the sensing a calibrated dVRK's),
+    ``sensing_label`` what the warning calls the sensing (default: the preset's name), ``force_limits_n`` the
+    force limits a grid sweeps (the warning names those, not the configuration's).
 
     Raises:
         ConfigurationError: The policy cannot be found or the workspace excludes the start pose.
@@ -87,12 +103,15 @@ def check_sweep_policy(
     Returns:
         The sweep's force-sensing warning ('' when its limit is one the sensing resolves).
     """
-    env = _environment(task, True, safety_config, force_sensing, tissue_ranges)
+    env = _environment(task, True, safety_config, force_sensing, tissue_ranges, calibrated_error_n=calibrated_error_n)
     resolve_policy(policy, env, allow_other_task=allow_other_task)
     _, info = env.reset(seed=0)
     check_start_inside_workspace(env, float(info["workspace_violation_m"]))
     warning = sensing_warning(
-        env.unwrapped.safety_config, f"{force_sensing} force sensing", calibrated=force_sensing == "dvrk-calibrated"
+        env.unwrapped.safety_config,
+        sensing_label or f"{force_sensing} force sensing",
+        calibrated=force_sensing == "dvrk-calibrated",
+        limits_n=force_limits_n,
     )
     for key in [k for k in _CACHE if k[0] == "env"]:
         _CACHE.pop(key).close()
@@ -112,6 +131,7 @@ def robustness_episode(
     tissue_ranges: Mapping[str, Any] | None = None,
     perception: str | None = None,
     texture: str | None = None,
+    calibrated_error_n: float | None = None,
 ) -> dict[str, Any]:
     """Run one trial of a sweep and return its outcome.
 
@@ -127,9 +147,13 @@ def robustness_episode(
         tissue_ranges: The tissue ranges the sweep declares (:func:`sim.robustness.sweep_ranges`).
         perception: ``camera[:MODEL]``: the site from the endoscope's images (``evaluate --perception``).
         texture: The flap's texture image file.
+        calibrated_error_n: A calibration file's error bound [N]: the sensing is a calibrated dVRK whose force is
+            off by at most that much (:func:`sim.force_sensing.calibrated_sensing`); None: the preset's.
     """
     params = {str(k): float(v) for k, v in trial["params"].items()}
-    env = _environment(task, safety, safety_config, force_sensing, tissue_ranges, perception, texture)
+    env = _environment(
+        task, safety, safety_config, force_sensing, tissue_ranges, perception, texture, calibrated_error_n
+    )
     policy_key = ("policy", policy, id(env))
     if policy_key not in _CACHE:
         _CACHE[policy_key] = resolve_policy(policy, env, allow_other_task=allow_other_task)
@@ -144,6 +168,8 @@ def robustness_episode(
     outcome["options"] = options
     # The flap's stiffness as drawn, swept or not: the report's table by fifth of it (sim.stiffness_fifths).
     outcome[STIFFNESS_KEY] = float(env.unwrapped.values[STIFFNESS_KEY])
+    # What the filter trusted the force to (the preset's bound, or a calibration file's).
+    outcome["force_sensing_error_n"] = float(env.unwrapped.safety_config.force_sensing_error_n)
     return outcome
 
 
@@ -155,8 +181,10 @@ def tuning_episode(
     base_config: Mapping[str, Any] | None = None,
     allow_other_task: bool = False,
     force_sensing: str = "ideal",
+    calibrated_error_n: float | None = None,
 ) -> dict[str, Any]:
-    """One episode of the policy under the trial's safety settings."""
+    """One episode of the policy under the trial's safety settings (``calibrated_error_n``: as
+    :func:`robustness_episode`)."""
     overrides = {**dict(base_config or {}), **integer_settings(trial["params"])}
     return robustness_episode(
         {**trial, "params": {}},
@@ -166,4 +194,5 @@ def tuning_episode(
         safety_config=overrides,
         allow_other_task=allow_other_task,
         force_sensing=force_sensing,
+        calibrated_error_n=calibrated_error_n,
     )

@@ -30,7 +30,7 @@ from sim.backend import SimBackend
 from sim.control import make_controller
 from sim.endoscope import Appearance, Endoscope, StereoFrame, render_stereo
 from sim.exposure import exposed_fraction, surface_samples
-from sim.force_sensing import ForceSensor, error_bound_n, sensing_params, with_sensing
+from sim.force_sensing import ForceSensor, SensingParams, error_bound_n, sensing_params, with_sensing
 from sim.grasp import GraspParams
 from sim.mechanics import DamageLimits, grasp_force, measure, spring_strain
 from sim.psm_body import PsmBody
@@ -74,7 +74,8 @@ class EnvConfig:
             :func:`sim.force_sensing.with_sensing`).
         force_sensing: What the controller and the policy sense of the tissue force: ``ideal`` (the exact
             force), ``dvrk`` (the console's ``measured_cf`` from motor currents) or ``dvrk-calibrated``
-            (:mod:`sim.force_sensing`). Episode records keep the true force as well.
+            (:mod:`sim.force_sensing`), or a sensing model (a calibration file's,
+            :func:`sim.force_sensing.calibrated_sensing`). Episode records keep the true force as well.
     """
 
     max_step_m: float = 0.005
@@ -91,7 +92,7 @@ class EnvConfig:
     camera: Camera = field(default_factory=Camera)
     endoscope: Endoscope = field(default_factory=Endoscope)
     safety_config: SafetyConfig | None = None
-    force_sensing: str = "ideal"
+    force_sensing: str | SensingParams = "ideal"
 
 
 class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -140,19 +141,20 @@ class TissueRetractEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         """Draw the next episodes from these ranges (over the configured ones; ``log_uniform`` names those drawn
         log-uniformly, see :class:`sim.randomization.Randomizer`), and bound the tissue by them."""
         self.randomizer = Randomizer({**self.config.randomization, **ranges}, log_uniform)
-        self.use_force_sensing(self.sensing.name)
+        self.use_force_sensing(self.sensing)
 
     @property
     def force_sensing(self) -> str:
         """The force-sensing preset the observation's and the controller's force come through."""
         return self.sensing.name
 
-    def use_force_sensing(self, name: str) -> None:
-        """Sense the tissue force through the preset ``name`` from the next episode on (:mod:`sim.force_sensing`).
+    def use_force_sensing(self, sensing: str | SensingParams) -> None:
+        """Sense the tissue force through the preset of that name, or that model, from the next episode on
+        (:mod:`sim.force_sensing`).
 
         The controller is rebuilt at the next reset: its filter trusts the force to the sensing's error bound.
         """
-        self.sensing = sensing_params(name)
+        self.sensing = sensing if isinstance(sensing, SensingParams) else sensing_params(sensing)
         config = self.config.safety_config or SafetyConfig()
         self.safety_config = with_sensing(config, error_bound_n(self.sensing, config), self.randomizer.ranges)
         self.controller = None

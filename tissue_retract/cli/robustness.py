@@ -43,7 +43,13 @@ from tissue_retract.cli._camera import (
     texture_warning,
 )
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, int_in
-from tissue_retract.cli._sensing import add_force_sensing_argument, announce
+from tissue_retract.cli._sensing import (
+    SweepSensing,
+    add_force_sensing_argument,
+    add_wrench_calibration_argument,
+    announce,
+    sweep_sensing,
+)
 from tissue_retract.workers import ROBUSTNESS_WORKER, check_sweep_policy
 
 #: The scripted expert's episodes of the same trials (``--beside-expert``).
@@ -72,7 +78,8 @@ def add_sweep_arguments(parser: argparse.ArgumentParser, name: str) -> None:
     )
     parser.add_argument("--out", type=Path, default=None, help=f"output folder (default runs/{name}-TASK)")
     parser.add_argument("--safety-config", type=Path, default=None, help="SafetyConfig TOML/YAML file")
-    add_force_sensing_argument(parser)
+    add_force_sensing_argument(parser, default=None)
+    add_wrench_calibration_argument(parser)
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument(
         "--fresh", action="store_true", help="delete the episodes of an earlier sweep in --out and start over"
@@ -153,9 +160,18 @@ def sweep_identity(args: argparse.Namespace, task_id: str, **settings: object) -
     }
 
 
+def calibration_identity(sensing: SweepSensing) -> dict[str, object]:
+    """``force_sensing_calibration`` for ``sweep.json`` and ``summary.json`` with a calibration file (nothing
+    without one, so a sweep written before the option resumes)."""
+    record = sensing.calibration_record()
+    return {} if record is None else {"force_sensing_calibration": record}
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write its files, print its summary."""
     task_id = gym_id(args.task)
+    sensing = sweep_sensing(args.force_sensing, args.wrench_calibration)
+    args.force_sensing = sensing.name  # the preset, as the policy variant and sweep.json name it
     ranges = parse_vary(args.vary)
     count = args.trials ** len(ranges) if args.mode == "grid" else args.trials
     if count > MAX_TRIALS:
@@ -175,12 +191,14 @@ def run(args: argparse.Namespace) -> int:
         allow_other_task=args.allow_other_task,
         force_sensing=args.force_sensing,
         tissue_ranges=declared,
+        calibrated_error_n=sensing.calibrated_error_n,
+        sensing_label=sensing.label,
     )
     announce(warning)
     texture = check_texture(args.texture) if args.texture is not None else None
     # Refused here, before any worker starts, if it is not a model.
     announce(texture_warning(load_perception(args.perception), texture))
-    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
+    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config, args.wrench_calibration))
     trials = make_trials(ranges, args.trials, mode=args.mode, seed=args.seed)
     kwargs = {
         "policy": args.policy,
@@ -193,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
         "tissue_ranges": {k: list(v) for k, v in declared.items()},
         "perception": args.perception,
         "texture": texture,
+        "calibrated_error_n": sensing.calibrated_error_n,
     }
     identity = sweep_identity(
         args,
@@ -205,6 +224,7 @@ def run(args: argparse.Namespace) -> int:
         force_sensing=args.force_sensing,
         perception=args.perception,
         texture=texture,
+        **calibration_identity(sensing),
     )
     if args.fresh:
         (out / EXPERT_EPISODES).unlink(missing_ok=True)
@@ -239,6 +259,7 @@ def run(args: argparse.Namespace) -> int:
             "episodes_per_s": ran / elapsed if ran and elapsed > 0 else None,
             "safety": not args.no_safety,
             "force_sensing": args.force_sensing,
+            **calibration_identity(sensing),
             "warnings": [warning] if warning else [],
             "beside_expert": expert_records is not None,
             "by_stiffness_fifth": [f.to_dict() for f in by_stiffness_fifth(records, expert_records)],
@@ -258,7 +279,7 @@ def run(args: argparse.Namespace) -> int:
         "varied": ", ".join(r.describe() for r in ranges),
         "sampling": f"{args.mode}, {args.trials} trials, seed {args.seed}",
         "safety filter": "on" if not args.no_safety else "OFF (ablation)",
-        "force sensing": args.force_sensing,
+        "force sensing": sensing.describe() if sensing.calibration is not None else args.force_sensing,
     }
     write_report(
         out,

@@ -11,6 +11,7 @@ when it is weak.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -23,7 +24,6 @@ from psm_control.errors import ConfigurationError
 from psm_control.outputs import atomic_path
 from safety.config import MAX_FORCE_LIMIT_N, SafetyConfig
 from sim.envs import gym_id
-from sim.force_sensing import error_bound_n, sensing_params
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success
 from sim.sweep import EpisodeStore, cap_jobs, parse_ranges, prepare_output, run_trials
@@ -40,8 +40,8 @@ from sim.tuning import (
     write_config,
 )
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, float_in, int_in
-from tissue_retract.cli._sensing import announce
-from tissue_retract.cli.robustness import add_sweep_arguments, safety_overrides, sweep_identity
+from tissue_retract.cli._sensing import SweepSensing, announce, sweep_sensing
+from tissue_retract.cli.robustness import add_sweep_arguments, calibration_identity, safety_overrides, sweep_identity
 from tissue_retract.workers import TUNING_WORKER, check_sweep_policy
 
 #: Files tune-safety writes into ``--out``.
@@ -77,26 +77,53 @@ def _plot(
     chosen: SettingResult | None,
     bound: float,
     limits_n: list[float],
+    eligible: list[bool],
     path: Path,
-) -> None:
-    figure = Figure(figsize=(5.5, 3.8), dpi=110)
+) -> Figure:
+    """Success against the largest peak, each setting's own force limit beside its peak on the same axis.
+
+    A setting is drawn as a cross when :func:`~sim.tuning.recommend` would not take it (its limit or its
+    peak above the bound, or no success), by that rule and no other; its limit is a bar joined to its peak,
+    so a setting whose peak is left of the bound and whose limit is right of it shows both.
+    """
+    figure = Figure(figsize=(6.0, 4.2), dpi=110)
     axis = figure.subplots()
-    # Settings above the bound are drawn last and on top (zorder), so the front's markers never hide them.
-    above_style = {"color": "tab:red", "marker": "x", "s": 60, "zorder": 4}
-    for above, style in ((False, {"color": "tab:gray", "marker": "o", "zorder": 2}), (True, above_style)):
-        shown = [r for r, limit in zip(results, limits_n, strict=True) if (limit > bound + 1e-9) is above]
-        axis.scatter(
-            [r.max_peak_force_n for r in shown],
-            [100 * r.success_rate for r in shown],
-            label="force limit above the bound (not recommended)" if above else "settings",
-            **style,  # type: ignore[arg-type]
-        )
+    colours = ["tab:gray" if ok else "tab:red" for ok in eligible]
+    for r, limit, colour in zip(results, limits_n, colours, strict=True):
+        y = 100 * r.success_rate
+        axis.plot([r.max_peak_force_n, limit], [y, y], color=colour, linewidth=1, alpha=0.5, zorder=1)
+    axis.scatter(
+        limits_n,
+        [100 * r.success_rate for r in results],
+        marker="|",
+        s=120,
+        c=colours,
+        zorder=2,
+        label="its force limit (joined to its peak)",
+    )
+    for ok, style, label in (
+        (True, {"color": "tab:gray", "marker": "o"}, "largest peak; may be recommended"),
+        (
+            False,
+            {"color": "tab:red", "marker": "x", "s": 60},
+            "largest peak; not: limit or peak above the bound, or no success",
+        ),
+    ):
+        shown = [r for r, e in zip(results, eligible, strict=True) if e is ok]
+        if shown:
+            axis.scatter(
+                [r.max_peak_force_n for r in shown],
+                [100 * r.success_rate for r in shown],
+                zorder=4,
+                label=label,
+                **style,
+            )
     axis.plot(
         [r.max_peak_force_n for r in front],
         [100 * r.success_rate for r in front],
-        "o-",
+        "-",
         color="tab:blue",
-        label="Pareto front",
+        label="Pareto front (of the peaks)",
         zorder=3,
     )
     if chosen is not None:
@@ -107,43 +134,49 @@ def _plot(
             facecolors="none",
             edgecolors="tab:green",
             linewidths=2,
+            zorder=5,
             label="recommended",
         )
-    axis.axvline(bound, color="red", linestyle="--", label=f"bound {bound:g} N (on the limit and the peaks)")
-    axis.set_xlabel("largest peak retraction force over the episodes [N]")
+    axis.axvline(bound, color="red", linestyle="--", label=f"bound {bound:g} N: limit and peak at or left of it")
+    axis.set_xlabel("force [N]: each setting's largest peak over its episodes, and its force limit")
     axis.set_ylabel("success [%]")
     axis.set_ylim(-5, 105)
     axis.grid(alpha=0.3)
-    axis.legend(fontsize=8)
+    axis.legend(fontsize=7)
     figure.tight_layout()
     with atomic_path(path, "--out") as temporary:
         figure.savefig(temporary)
+    return figure
 
 
-def _limits_below_sensing(limits_n: list[float], sensing: str, sensing_error_n: float | None) -> str:
-    """The run-start warning when some settings' force limits are below what the sensing can tell ('' if none)."""
-    if sensing_error_n is None:
-        return ""
-    below = [limit for limit in limits_n if limit <= sensing_error_n]
-    if not below:
-        return ""
-    return (
-        f"WARNING: {len(below)} of {len(limits_n)} force limits swept ({', '.join(f'{v:.3g}' for v in below)} N) "
-        f"are below the force sensing's error bound {sensing_error_n:.2f} N ({sensing}): under them the filter "
-        "cannot tell the limit from the measured force and keeps it from the grasp point's travel instead, so a "
-        "retraction may stop short. They are swept and shown, and recommended only where the policy succeeds"
-    )
+def _grid(low: float, high: float) -> str:
+    """A ``--grid`` of force limits from ``low`` to ``high`` [N], as a user would type it."""
+    return f"--grid force_limit_n={low:.3g}:{high:.3g}"
 
 
 def _nothing_recommended(
-    results: list[SettingResult], bound: float, base: dict[str, object], sensing: str, sensing_error_n: float | None
+    results: list[SettingResult],
+    bound: float,
+    base: dict[str, object],
+    sensing: SweepSensing,
+    sensing_error_n: float | None,
 ) -> str:
-    """Why no setting qualified, with the numbers."""
+    """Why no setting qualified, with the numbers, and what grid or setting would give a recommendation."""
     limits = [setting_force_limit_n(r.setting, base) for r in results]
+    succeeded = [(limit, r) for r, limit in zip(results, limits, strict=True) if r.successes > 0 and r.errors == 0]
+    above = [(limit, r) for limit, r in succeeded if limit > bound + 1e-9]
+    evidence = ""
+    if above:
+        limit, r = min(above, key=lambda pair: pair[0])
+        evidence = (
+            f"--max-force-n {limit:g}, if the tissue allows that force: the lowest force limit the policy succeeded "
+            f"under here is {limit:g} N ({describe_success(r.successes, r.episodes)})"
+        )
     if all(limit > bound + 1e-9 for limit in limits):
+        todo = [f"sweep force limits at or below it ({_grid(bound / 2, bound)})", *([evidence] if evidence else [])]
         return (
-            f"every setting's force limit ({min(limits):g}-{max(limits):g} N) is above the bound {bound:g} N; "
-            "sweep force_limit_n at or below it"
+            f"every setting's force limit ({min(limits):g}-{max(limits):g} N) is above the bound {bound:g} N. "
+            f"What would give a recommendation: {'; or '.join(todo)}"
         )
     within = [(r, limit) for r, limit in zip(results, limits, strict=True) if limit <= bound + 1e-9]
     if all(r.successes == 0 for r, _ in within):
@@ -152,29 +185,53 @@ def _nothing_recommended(
             f"the policy succeeded in no episode under any setting with a force limit <= {bound:g} N "
             f"({len(within)} setting(s), limits {low:.3g}-{high:.3g} N)"
         )
+        todo = []
         if sensing_error_n is not None and all(lim <= sensing_error_n for _, lim in within):
-            better = (
-                "a calibration of the robot's own force sensing with a tighter bound (calibrate-wrench) would lower it"
-                if sensing == "dvrk-calibrated"
-                else "calibrate the force sensing (calibrate-wrench; --force-sensing dvrk-calibrated here)"
-            )
-            raise_limit = (
-                f"Raise --max-force-n above {sensing_error_n:.2f} N if the tissue allows it, or {better}"
-                if sensing_error_n < MAX_FORCE_LIMIT_N
-                else f"No force limit the safety filter takes ({MAX_FORCE_LIMIT_N:g} N at most) is above it: " + better
-            )
             why += (
                 f"; every one of those limits is below the force sensing's error bound {sensing_error_n:.2f} N "
-                f"({sensing}): the filter cannot tell the limit from the measured force and stops each retraction "
-                f"at the grasp's travel bound. {raise_limit}"
+                f"({sensing.label}): the filter cannot tell the limit from the measured force and stops each "
+                "retraction at the grasp's travel bound"
             )
-        return why
-    return f"no setting with a force limit <= {bound:g} N kept its largest observed peak force under {bound:g} N"
+            if sensing_error_n + 1.0 < MAX_FORCE_LIMIT_N:
+                first = math.ceil(sensing_error_n + 1.0)
+                last = min(MAX_FORCE_LIMIT_N, 2 * first)
+                todo.append(
+                    f"force limits above that error bound, where the measured force tells the limit, if the tissue "
+                    f"allows them: {_grid(first, last)} --max-force-n {last:g}"
+                )
+            else:
+                why += f". No force limit the safety filter takes ({MAX_FORCE_LIMIT_N:g} N at most) is above it"
+            if sensing.calibration is not None:
+                todo.append(
+                    f"a calibration whose error_bound_with_acceleration_n is below {bound:g} N (this file's is "
+                    f"{sensing.error_n:.2f} N): calibrate-wrench again on logs of the poses and speeds the task moves "
+                    "at, then --wrench-calibration with the new file"
+                )
+            else:
+                todo.append(
+                    f"calibrate the force sensing (calibrate-wrench) and sweep with the robot's own file "
+                    f"(--wrench-calibration F.json): limits above its error_bound_with_acceleration_n are told from "
+                    f"the measured force, so one below {bound:g} N would give this grid a recommendation"
+                )
+        elif not evidence:
+            todo.append(
+                f"higher force limits, if the tissue allows them ({_grid(high, 2 * high)} --max-force-n {2 * high:.3g})"
+            )
+        if evidence:
+            todo.append(evidence)
+        return f"{why}. What would give a recommendation: {'; or '.join(todo)}"
+    return (
+        f"no setting with a force limit <= {bound:g} N kept its largest observed peak force under {bound:g} N. "
+        f"What would give a recommendation: force limits a tenth or more below the bound (the true peak stays "
+        f"within 1.10 x the limit): {_grid(bound / 2, bound / 1.1)}"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the sweep, write the table, plot and recommended configuration."""
     task_id = gym_id(args.task)
+    sensing = sweep_sensing(args.force_sensing, args.wrench_calibration)
+    args.force_sensing = sensing.name  # the preset, as the policy variant and sweep.json name it
     try:
         ranges = parse_ranges(args.grid, valid_names=tunable_fields())
     except ConfigurationError as e:  # the range grammar is robustness's --vary; here the option is --grid
@@ -193,18 +250,21 @@ def run(args: argparse.Namespace) -> int:
     )
     trials = tuning_trials(ranges, args.levels, args.episodes, seed=args.seed)
     out = args.out or Path("runs") / f"tune-safety-{task_id}"
-    announce(
-        check_sweep_policy(
-            args.policy, task_id, base, allow_other_task=args.allow_other_task, force_sensing=args.force_sensing
-        )
-    )
-    sensing_error_n = None if args.force_sensing == "ideal" else error_bound_n(sensing_params(args.force_sensing))
-    sensing_note = _limits_below_sensing(
-        sorted({setting_force_limit_n(t.params, base) for t in trials}), args.force_sensing, sensing_error_n
+    # One warning, naming the limits the grid runs (not the configuration's, which a force_limit_n grid replaces).
+    sensing_note = check_sweep_policy(
+        args.policy,
+        task_id,
+        base,
+        allow_other_task=args.allow_other_task,
+        force_sensing=args.force_sensing,
+        calibrated_error_n=sensing.calibrated_error_n,
+        sensing_label=sensing.label,
+        force_limits_n=sorted({setting_force_limit_n(t.params, base) for t in trials}),
     )
     announce(sensing_note)
+    sensing_error_n = None if args.force_sensing == "ideal" else sensing.error_n
     run_warnings = [sensing_note] if sensing_note else []
-    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config))
+    check_out_folder(out, OUTPUTS, (args.policy, args.safety_config, args.wrench_calibration))
     identity = sweep_identity(
         args,
         task_id,
@@ -213,6 +273,7 @@ def run(args: argparse.Namespace) -> int:
         episodes=args.episodes,
         safety_config=base,
         force_sensing=args.force_sensing,
+        **calibration_identity(sensing),
     )
     prepare_output(out, identity, fresh=args.fresh)
     records = run_trials(
@@ -228,6 +289,7 @@ def run(args: argparse.Namespace) -> int:
             "base_config": base,
             "allow_other_task": args.allow_other_task,
             "force_sensing": args.force_sensing,
+            "calibrated_error_n": sensing.calibrated_error_n,
         },
     )
     failed = [r for r in records if "error" in r]
@@ -277,7 +339,16 @@ def run(args: argparse.Namespace) -> int:
             quantity(r.max_peak_force_n, "N"),
             mark.strip(),
         )
-    _plot(results, front, chosen, bound, [setting_force_limit_n(r.setting, base) for r in results], out / "pareto.png")
+    eligible = [recommend([r], bound, base) is not None for r in results]  # the recommendation's own rule
+    _plot(
+        results,
+        front,
+        chosen,
+        bound,
+        [setting_force_limit_n(r.setting, base) for r in results],
+        eligible,
+        out / "pareto.png",
+    )
     summary: dict[str, object] = {
         "task": task_id,
         "policy": args.policy,
@@ -295,7 +366,9 @@ def run(args: argparse.Namespace) -> int:
             for r in results
         ],
     }
-    summary.update(force_sensing=args.force_sensing, force_sensing_error_n=sensing_error_n)
+    summary.update(
+        force_sensing=args.force_sensing, force_sensing_error_n=sensing_error_n, **calibration_identity(sensing)
+    )
     alert = ["verdict"]
     warnings: list[str] = []
     if chosen is not None:
@@ -326,16 +399,13 @@ def run(args: argparse.Namespace) -> int:
         }
         alert = ["warnings"] if warnings or run_warnings else []
     else:
-        why = _nothing_recommended(results, bound, base, args.force_sensing, sensing_error_n)
+        why = _nothing_recommended(results, bound, base, sensing, sensing_error_n)
         verdict = "Nothing recommended (why below)"
     summary["warnings"] = run_warnings + [f"weak recommendation: {w}" for w in warnings]
-    sensing = (
-        args.force_sensing if sensing_error_n is None else f"{args.force_sensing}, error bound {sensing_error_n:.2f} N"
-    )
     card = [
         ("policy", args.policy),
         ("task", task_id),
-        ("force sensing", sensing),
+        ("force sensing", sensing.describe()),
         ("asked", f"grid {args.grid} ({args.levels} levels, {len(results)} settings), force bound {bound:g} N"),
         ("episodes per setting", f"{args.episodes}, seed {args.seed}"),
         ("verdict", verdict),
@@ -351,7 +421,11 @@ def run(args: argparse.Namespace) -> int:
         [*names, *limit_column, "success", "95 % CI", "max peak force", "mean peak force", "interventions", "Pareto"],
         rows,
     )
-    page.figure(out / "pareto.png", "success against the largest peak force; the Pareto front in blue")
+    page.figure(
+        out / "pareto.png",
+        "success against the largest peak force, each setting's force limit a bar joined to its peak; crosses: "
+        "not recommendable (limit or peak above the bound, or no success); the Pareto front in blue",
+    )
     page.write(out, stem="settings")
     write_strict_json(out / "summary.json", summary, sort_keys=True)
     console = Console(width=110)
