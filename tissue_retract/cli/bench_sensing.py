@@ -3,7 +3,10 @@
 On a free-space joint log (nothing touches the tool, so the console's whole estimate is error) it prints,
 by insertion depth and tool-tip speed, the RMS of:
 
-* the real console's estimate, ``pinv(J^T) tau`` of the logged efforts, as the console computes it;
+* the logged console's estimate, ``pinv(J^T) tau`` of the logged efforts, as the console computes it; the
+  column is named by the console the log came from: ``real console`` for the public WPI and radiang layouts
+  (real PSMs), the console a bag's metadata names (``custom_data: console``, ``sim-dvrk`` or ``dvrk``), else
+  ``logged console`` (a bag or a deploy recording does not say whether a real PSM or ``sim-dvrk`` served it);
 * the ``dvrk`` sensing preset's estimate along the same motion (:mod:`sim.force_sensing`);
 * an identified arm's (:mod:`sim.identified_arm`) along the same motion: its free-space efforts and its
   residual, drawn as the model draws it.
@@ -12,7 +15,8 @@ With ``--calibration F.json`` (a ``calibrate-wrench`` file fitted on another log
 a calibrated deploy reads: the calibrated error on the log with its accelerations (a deploy gives the
 calibration the chain's commanded acceleration, which the arm tracks), the ``dvrk-calibrated`` preset's, and
 the calibrated error with no acceleration at all, for scale. Ratios are model over real: the presets' error
-statistics should be within 25 % of the real ones (0.75-1.25) in the bins a log covers.
+statistics should be within 25 % of the real ones (0.75-1.25) in the bins a log covers. A bin of fewer than
+:data:`THIN_SAMPLES` samples is marked thin (``thin`` in the JSON): its RMS is a few samples', not the bin's.
 
 With ``--write-arm OUT.json --held-out LOG`` it first identifies an arm: ``calibrate-wrench``'s model fitted
 on the ``--from`` logs, its residual (spread and correlation time per joint) measured on the held-out log,
@@ -33,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from hardware_if.wrench.bag_files import MAX_BAG_METADATA_BYTES
 from hardware_if.wrench.calibration import read_calibration
 from hardware_if.wrench.fit import (
     DEPTH_BINS_M,
@@ -44,14 +49,22 @@ from hardware_if.wrench.fit import (
 )
 from hardware_if.wrench.joint_logs import read_joint_log
 from psm_control.errors import ConfigurationError
-from psm_control.inputs import check_output_path
+from psm_control.inputs import check_output_path, load_yaml, read_text
 from psm_control.robot import PsmModel
 from sim.force_sensing import ArmResidual, ForceSensor, sensing_params
 from sim.identified_arm import ARM_FILES, IdentifiedArm, identified_arm
 from sim.strict_json import write_strict_json
 from tissue_retract.cli._checks import int_in, output_file
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["THIN_SAMPLES", "add_arguments", "run"]
+
+#: A bin with fewer samples than this is thin: its RMS says little (the 0.75-1.25 comparison asks for 50 or more).
+THIN_SAMPLES = 50
+#: Log layouts recorded on real PSMs (:mod:`hardware_if.wrench.joint_logs`): the public WPI and radiang logs.
+_REAL_PSM_LAYOUTS = {
+    "wpi": "a real PSM's (the WPI-AIM/dvrk_dynamics_identification layout)",
+    "radiang": "a real PSM's (the radiang/dvrk_parameter_identification layout)",
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -207,11 +220,35 @@ def _bins(key: np.ndarray, edges: tuple[float, ...], columns: dict[str, np.ndarr
     for low, high in itertools.pairwise(edges):
         inside = (key >= low) & (key < high)
         if np.any(inside):
+            samples = int(inside.sum())
             rows.append(
-                {"bin": [low, high if math.isfinite(high) else None], "samples": int(inside.sum())}
+                {"bin": [low, high if math.isfinite(high) else None], "samples": samples}
+                | {"thin": samples < THIN_SAMPLES}
                 | {name: _rms(values[inside]) for name, values in columns.items()}
             )
     return rows
+
+
+def _log_console(path: str | Path, layout: str) -> tuple[str, str]:
+    """Which console a log came from, as far as the log says: (``dvrk``, ``sim-dvrk`` or ``unknown``, why)."""
+    if layout in _REAL_PSM_LAYOUTS:
+        return "dvrk", _REAL_PSM_LAYOUTS[layout]
+    metadata = Path(path) / "metadata.yaml"
+    if layout == "rosbag2" and metadata.is_file():
+        document = load_yaml(read_text(metadata, "--from", MAX_BAG_METADATA_BYTES), "--from", metadata)
+        info = document.get("rosbag2_bagfile_information") if isinstance(document, dict) else None
+        custom = info.get("custom_data") if isinstance(info, dict) else None
+        named = custom.get("console") if isinstance(custom, dict) else None
+        if named in ("dvrk", "sim-dvrk"):
+            return str(named), f"named by the bag's metadata (custom_data: console: {named})"
+    what = "a deploy recording" if layout == "recording" else "a rosbag2 bag"
+    return "unknown", f"not named: {what} does not say whether a real PSM or sim-dvrk served it"
+
+
+#: The first column's name by the console a log came from.
+_CONSOLE_COLUMN = {"dvrk": "real console", "sim-dvrk": "sim-dvrk console", "unknown": "logged console"}
+#: The calibrated column's name by the console a log came from.
+_CALIBRATED_COLUMN = {"dvrk": "real, calibrated", "sim-dvrk": "sim-dvrk, calibrated", "unknown": "logged, calibrated"}
 
 
 def _table(title: str, rows: list[dict[str, Any]], names: list[str], unit: str) -> list[str]:
@@ -222,7 +259,8 @@ def _table(title: str, rows: list[dict[str, Any]], names: list[str], unit: str) 
         label = f"{low * scale:g}-{high * scale:g} {unit}" if high is not None else f">= {low * scale:g} {unit}"
         real = row[names[0]]
         cells = [f"{real:22.2f}"] + [f"{row[n]:13.2f} ({row[n] / real:4.2f} x)" for n in names[1:]]
-        lines.append(f"  {label:<14} {row['samples']:>7}  " + "  ".join(cells))
+        thin = f"  thin: fewer than {THIN_SAMPLES} samples" if row["samples"] < THIN_SAMPLES else ""
+        lines.append(f"  {label:<14} {row['samples']:>7}  " + "  ".join(cells) + thin)
     return lines
 
 
@@ -259,18 +297,21 @@ def run(args: argparse.Namespace) -> int:
     results: dict[str, Any] = {"identified_arm": arm.name, "logs": {}}
     for path in paths:
         log = prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate))
-        entry = {
+        console, said = _log_console(path, log.log.layout)
+        print(f"{path}: console: {console} ({said})")
+        entry: dict[str, Any] = {
+            "logged_by": {"console": console, "said_by": said, "layout": log.log.layout},
             "console": _compare(
                 log,
                 {
-                    "real console": _norms(log, log.log.effort),
+                    _CONSOLE_COLUMN[console]: _norms(log, log.log.effort),
                     "dvrk preset": _over_draws(args.draws, functools.partial(_preset_errors, log, "dvrk")),
                     f"{arm.name}": _over_draws(
                         args.draws,
                         functools.partial(_arm_errors, log, arm, log.model_efforts(arm.parameter_vector())),
                     ),
                 },
-            )
+            ),
         }
         _print(f"{path}: the console's free-space estimate", entry["console"])
         if calibration is not None:
@@ -278,7 +319,7 @@ def run(args: argparse.Namespace) -> int:
             entry["calibrated"] = _compare(
                 log,
                 {
-                    "real, calibrated": error.after_n,
+                    _CALIBRATED_COLUMN[console]: error.after_n,
                     "dvrk-calibrated": _over_draws(
                         args.draws, functools.partial(_preset_errors, log, "dvrk-calibrated")
                     ),
