@@ -209,7 +209,9 @@ class PsmClient(ArmListener):
                 (q.copy() for q in (self._setpoint_q, facts.measured_q) if q is not None),
                 None,
             )
-            self.get_logger().error(f"{self.topics.arm}: holding, {status.reason}")
+            # A listener (a dry run, register) commands nothing, so nothing holds the arm: it says so.
+            verb = "stopped, nothing commanded" if self.listen_only else "holding"
+            self.get_logger().error(f"{self.topics.arm}: {verb}, {status.reason}")
             self._send_hold()
             if self._on_fault is not None:
                 self._on_fault(status)

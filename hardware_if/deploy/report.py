@@ -32,6 +32,7 @@ __all__ = [
     "account",
     "account_excursions",
     "command_payload",
+    "hold_advice",
     "measured_payload",
     "record_hold",
     "warn_sensing",
@@ -135,10 +136,34 @@ class DeployReport:
             out.append(f"  predicted peak force {self.predicted_peak_force_n:.3f} N")
         if self.fault:
             out.append(f"  HOLD: {self.fault}")
+            advice = hold_advice(self.fault)
+            if advice:
+                out.append(f"  {advice}")
         if self.interrupted:
             name = "Ctrl-C" if self.signal in ("", "SIGINT") else self.signal
             out.append(f"  interrupted ({name}): stopped commanding between two ticks")
         return out
+
+
+def hold_advice(reason: str) -> str:
+    """What a user can change after a hold that a busy machine can cause, or "" for any other hold.
+
+    A stale ``measured_js`` (the client's deadman or the chain's) and a policy overrun are the holds a machine
+    busy with other work causes in a rehearsal against ``sim-dvrk`` (docs/rehearsal-and-reports.md); on a robot
+    they say that its measurements or the policy came late, which no setting should hide.
+    """
+    if reason.startswith("stale:"):
+        return (
+            "what to change: if this machine is busy with other work, raise deadman_timeout_s (at most 1 s) in a "
+            "--safety-config TOML file (e.g. deadman_timeout_s = 0.3) for a rehearsal; on a robot, find what "
+            "delays its measurements first (docs/dvrk.md#the-deadmans-timeout)"
+        )
+    if reason.startswith("policy overrun:"):
+        return (
+            "what to change: if this machine is busy with other work, give a rehearsal's policy longer with "
+            "--policy-budget S (e.g. 0.2); on a robot, a policy step must end within its period"
+        )
+    return ""
 
 
 def measured_payload(measured: MeasuredState, effort: np.ndarray | None = None) -> dict[str, Any]:

@@ -5,9 +5,9 @@ process id without xdist) and splits the 100 usable domains into one block per w
 one run can never meet on a domain. Within its block a worker's tests pick fixed offsets: 0 is the
 worker's own domain (the ``ros_env`` of every test), the dVRK client's servers take the last
 :data:`CLIENT_SLOTS` (:func:`client_domain_id`), the one before them is for a program that commands an arm
-under a shared node name (:func:`commander_domain_id`) and the fault matrix takes the ones between
-(:func:`fault_domain_id`). No offset wraps onto another kind's: a fault's server can never share the domain
-of a test's own sim-dvrk.
+under a shared node name (:func:`commander_domain_id`), the one before that for the documented rehearsal
+(:func:`page_domain_id`) and the fault matrix takes the ones between (:func:`fault_domain_id`). No offset
+wraps onto another kind's: a fault's server can never share the domain of a test's own sim-dvrk.
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def fault_domain_id(index: int) -> int:
     Faults run one at a time on a worker, so indices that share a domain (the block has fewer fault domains
     than the matrix has faults and retries) never meet on it.
     """
-    slots = block_size() - CLIENT_SLOTS - 2
+    slots = block_size() - CLIENT_SLOTS - 3
     return worker_domain_id(1 + index % slots)
 
 
@@ -76,3 +76,9 @@ def commander_domain_id() -> int:
     later deploy would then see it as another commander of the arm, and hold (measured once in a full run).
     """
     return worker_domain_id(block_size() - CLIENT_SLOTS - 1)
+
+
+def page_domain_id() -> int:
+    """The domain of the rehearsal a documentation page shows, run as written: a fresh console of its own, where
+    no node of an earlier test (a deploy, a fault's injector) can linger."""
+    return worker_domain_id(block_size() - CLIENT_SLOTS - 2)

@@ -28,6 +28,7 @@ import argparse
 import dataclasses
 import json
 import math
+import shlex
 import signal
 import sys
 import time
@@ -47,6 +48,7 @@ from sim.envs.base import EnvConfig
 from sim.force_sensing import error_bound_n, sensing_params
 from sim.sweep.stopping import handling
 from tissue_retract.cli._checks import float_in
+from tissue_retract.cli._next import command, console_words, say_next
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
 __all__ = ["add_arguments", "run"]
@@ -231,6 +233,11 @@ def _offline(args: argparse.Namespace) -> int:
         if args.json:
             write_atomic(args.json, json.dumps(summary, indent=2) + "\n", "--json")
             print(f"written to {args.json}")
+        if verdict["bound_held"]:
+            say_next(
+                f"{command('ready-arm', '--arm', args.arm)} (enable, home, to the episodes' start), then deploy "
+                f"--target dvrk --wrench-calibration {shlex.quote(args.check)} --dry-run"
+            )
         return 0 if verdict["bound_held"] else 1
     if args.out is None:
         raise ConfigurationError("--out", None, "a file to write the calibration to (or --check F.json)")
@@ -269,6 +276,10 @@ def _offline(args: argparse.Namespace) -> int:
         return 1
     calibration.write(Path(output))
     print(f"written to {output} (fitted on {calibration.origin})")
+    say_next(
+        f"{command('calibrate-wrench', '--check', str(output), '--from', 'LOG')} (a free-space log of this arm "
+        f"the fit has not seen), then deploy --target dvrk --wrench-calibration {shlex.quote(str(output))}"
+    )
     return 0
 
 
@@ -420,4 +431,8 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
     if record_error is not None:
         print(f"tissue-retract calibrate-wrench: error: {record_error}", file=sys.stderr)
         return 1
+    say_next(
+        f"{command('ready-arm', '--arm', args.arm, *console_words(args))} (back to the episodes' start: a dry run "
+        f"moves nothing), then deploy --target dvrk --wrench-calibration {shlex.quote(str(output))} --dry-run"
+    )
     return 0

@@ -74,6 +74,7 @@ from tissue_retract.cli._camera import (
 )
 from tissue_retract.cli._checks import MAX_EPISODES, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
+from tissue_retract.cli._next import command, replay_command, say_next, without_options
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments, point_argument
 from tissue_retract.cli._sensing import add_force_sensing_argument, announce
 
@@ -273,6 +274,17 @@ def run(args: argparse.Namespace) -> int:
     report = deploy(options, echo=lambda line: print(line, flush=True))
     for line in report.lines():
         print(line)
-    if report.fault:
+    if report.fault and options.dry_run:  # nothing was commanded, so nothing holds the arm
+        print(
+            f"tissue-retract deploy: the dry run stopped: {report.fault}; it commanded nothing: the arm is as the "
+            "console left it",
+            file=sys.stderr,
+        )
+    elif report.fault:
         print(f"tissue-retract deploy: stopped, the arm is held: {report.fault}", file=sys.stderr)
+    elif report.exit_code == 0 and options.dry_run:
+        commanded = command(*without_options(args, ("--dry-run", "--force"), ("--record",)))
+        say_next(f"{commanded} (the same run, commanded: the arm moves)")
+    elif report.exit_code == 0:
+        say_next(f"{replay_command(record)} (the run's forces, jaw, tracking and safety events)")
     return report.exit_code

@@ -18,6 +18,7 @@ from typing import Any
 
 from sim.sweep.stopping import handling
 from tissue_retract.cli._checks import float_in
+from tissue_retract.cli._next import command, console_words, say_next
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
 __all__ = ["add_arguments", "run"]
@@ -94,4 +95,11 @@ def run(args: argparse.Namespace) -> int:
         return 128 + e.signum
     joints = " ".join(f"{value:.4g}" for value in start_q)
     print(f"{args.arm}: at the episodes' start (joints {joints}; jaw open {start_jaw:g} rad): ready")
+    arm, console = ["--arm", args.arm], console_words(args)
+    deploy = ["--policy", "pretrained", "--target", "dvrk", "--task", args.task, *arm[: 2 * (args.arm != "PSM1")]]
+    dry_run = command("deploy", *deploy, "--wrench-calibration", "wrench.json", *console, "--dry-run")
+    say_next(
+        f"{command('calibrate-wrench', *arm, '--out', 'wrench.json', *console)} (free space, nothing in the jaws); "
+        f"once calibrated, the dry run: {dry_run}"
+    )
     return 0

@@ -13,11 +13,13 @@ also writes it as JSON for ``deploy --registration FILE``. Discovery stays on lo
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 
 from psm_control.inputs import check_output_path
 from sim.strict_json import write_strict_json
 from tissue_retract.cli._checks import float_in, int_in
+from tissue_retract.cli._next import command, console_words, say_next
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
 
 __all__ = ["add_arguments", "run"]
@@ -70,4 +72,9 @@ def run(args: argparse.Namespace) -> int:
     if output is not None:
         write_strict_json(output, registration.to_dict(), field="--out")
         print(f"  written to {output}")
+    site = ["--registration", str(output)] if output else ["--site", *(f"{v:.4f}" for v in registration.site_m)]
+    say_next(
+        f"{command('ready-arm', '--arm', args.arm, *console_words(args))} (enable, home, to the episodes' start), "
+        f"then deploy --target dvrk {shlex.join(site)} --dry-run"
+    )
     return 0

@@ -55,6 +55,7 @@ from sim.scene_stream import LiveScene, SceneStream
 from tissue_retract.cli._camera import add_texture_argument, check_texture
 from tissue_retract.cli._checks import MAX_EPISODES, float_in, int_in
 from tissue_retract.cli._live import add_live_argument
+from tissue_retract.cli._next import command, say_next
 
 __all__ = ["add_arguments", "run"]
 
@@ -242,6 +243,13 @@ def run(args: argparse.Namespace) -> int:
             node.get_logger().info(
                 f"simulated {args.arm} at {args.rate:g} Hz on ROS_DOMAIN_ID={args.domain_id} (localhost discovery)"
             )
+            console = ["--domain-id", str(args.domain_id)] if args.domain_id != environment_domain_id() else []
+            if args.blind and args.place_jaws_on is not None:
+                register = command("register", "--arm", args.arm, "--out", "site.json", *console)
+                step = f"{register} (the jaws are on the site)"
+            else:
+                step = f"{command('ready-arm', '--arm', args.arm, *console)} (enable, home, to the episodes' start)"
+            say_next(f"in another terminal, {step}")
             freeze_startup_heap()  # before the loop: short collector pauses from here on
             # From here Ctrl-C asks the loop to end: a KeyboardInterrupt raised in a callback that the C++
             # events executor runs is logged as a fatal callback error on its way out.
