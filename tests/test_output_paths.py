@@ -350,7 +350,7 @@ def _case(tmp: Path, row: Output, target: Target) -> dict[str, Any]:
             [sys.executable, "-m", "tissue_retract", *argv],
             capture_output=True,
             text=True,
-            timeout=120,
+            timeout=300,
             check=False,
             cwd=folder,
         )
