@@ -170,7 +170,8 @@ def test_dry_run_publishes_nothing_on_motion_topics(
 def test_dry_run_on_a_fresh_console_says_at_once_what_it_waits_for(
     sim: subprocess.Popen[str], ros_env: dict[str, str], tmp_path: Path
 ) -> None:
-    """A dry run on a DISABLED arm prints the state it sees and how to enable and home before it waits."""
+    """A dry run on a DISABLED arm prints the state it sees and how to enable and home before it waits; when the
+    wait ends, it says that it commanded nothing (nothing holds an arm a dry run never commanded)."""
     # The wait covers discovery (up to DISCOVERY_S on this machine, longer when it is loaded) and then expires.
     deploy = _deploy(ros_env, tmp_path / "dry.mcap", "--dry-run", "--wait", "10")
     output, _ = deploy.communicate(timeout=DEPLOY_TIMEOUT_S)
@@ -185,6 +186,8 @@ def test_dry_run_on_a_fresh_console_says_at_once_what_it_waits_for(
         and "tissue-retract ready-arm --arm PSM1" in hint
     ), hint
     assert "nan" not in output.lower(), output
+    assert "the arm is held" not in output and "HOLD: not ready: " in output, output
+    assert "it commanded nothing: the arm is as the console left it" in output, output
 
 
 def test_killing_sim_dvrk_mid_episode_holds_and_reports(
