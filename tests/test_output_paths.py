@@ -355,7 +355,7 @@ def _case(tmp: Path, row: Output, target: Target) -> dict[str, Any]:
             cwd=folder,
         )
         status, text = done.returncode, done.stdout + done.stderr
-    except subprocess.TimeoutExpired as e:  # an old writer blocks on a FIFO: refused by nobody
+    except subprocess.TimeoutExpired as e:  # a writer that opened a FIFO blocks there: nothing refused it
         status, text = None, f"timed out: {e.stdout!r} {e.stderr!r}"
     words = (row.option, "not allowed: expected", *target.words)
     problems = []
