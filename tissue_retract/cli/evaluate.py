@@ -62,6 +62,7 @@ from tissue_retract.cli._camera import (
 )
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, int_in
 from tissue_retract.cli._live import add_live_argument
+from tissue_retract.cli._next import command, say_next
 from tissue_retract.cli._sensing import add_force_sensing_argument, announce
 
 __all__ = ["add_arguments", "episode_seeds", "run"]
@@ -265,4 +266,9 @@ def run(args: argparse.Namespace) -> int:
         kept = f"; the {len(results)} finished episodes are in {output}" if output is not None else ""
         print(f"tissue-retract evaluate: interrupted{kept}", file=sys.stderr)
         return interrupted
+    sweep = command("robustness", "--policy", args.policy, "--task", args.task, "--trials", "100")
+    say_next(
+        f"{sweep} (success and force over randomized tissue and timing) or tune-safety (the force limit), then "
+        "the rehearsal against sim-dvrk (docs/rehearsal-and-reports.md)"
+    )
     return 0

@@ -51,6 +51,8 @@ from sim.robustness import TrainingRanges, parse_vary, training_ranges
 from tissue_retract.cli._blind import add_blind_arguments
 from tissue_retract.cli._camera import add_perception_argument, load_perception
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, float_in, int_in
+from tissue_retract.cli._next import command as tissue_retract_command
+from tissue_retract.cli._next import say_next
 from tissue_retract.cli._sensing import add_force_sensing_argument
 
 __all__ = ["add_arguments", "parse_overrides", "run", "task_wrapper"]
@@ -255,6 +257,9 @@ def run(args: argparse.Namespace) -> int:
             f"({result.learning_steps} steps after the random seed steps, evaluation excluded; "
             f"{result.learning_steps_per_cpu_second:.1f} per CPU-second of this process)"
         )
+    sensing = ["--force-sensing", args.force_sensing] if args.force_sensing not in (None, "ideal") else []
+    evaluate = ["evaluate", "--policy", str(result.policy_path), "--task", args.task, "--episodes", "100", *sensing]
+    say_next(f"{tissue_retract_command(*evaluate)} (the policy on episodes it never saw)")
     if args.budget_s is not None and sys.argv[1:2] == ["train"]:
         _end_process_now(0)
     return 0
