@@ -32,7 +32,6 @@ def _calibration(path: Path) -> Path:
         samples=2000,
         sensing="measured_js",
         console="sim-dvrk",
-        max_after_retraction_speed_n=3.68,
     ).write(path)
     return path
 
@@ -49,6 +48,17 @@ def tuned(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "--out", str(out), "--no-progress",
     )  # fmt: skip
     return {"result": result, "out": out, "calibration": calibration}
+
+
+@pytest.fixture(scope="module")
+def tuned_preset(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """tune-safety over force limits 1-1.5 N under a 1.5 N bound with the dvrk-calibrated preset (7.21 N)."""
+    out = tmp_path_factory.mktemp("preset")
+    return run_cli(
+        "tune-safety", "--policy", "scripted", "--task", "lift", "--grid", "force_limit_n=1:1.5", "--levels", "2",
+        "--episodes", "1", "--jobs", "1", "--max-force-n", "1.5", "--force-sensing", "dvrk-calibrated",
+        "--out", str(out), "--no-progress",
+    )  # fmt: skip
 
 
 def test_tune_safety_senses_through_the_calibration_file_and_says_so(tuned: dict[str, Any]) -> None:
@@ -71,26 +81,31 @@ def test_tune_safety_senses_through_the_calibration_file_and_says_so(tuned: dict
         assert "4.60 N" in text and "70.99 N" in text, page
 
 
-def test_tune_safety_warns_about_the_grid_limits_not_the_default(tuned: dict[str, Any]) -> None:
-    """With --grid force_limit_n=1:1.5 the run-start warning names 1 and 1.5 N (and the travel each allows), never
-    the 3 N default the grid replaces."""
-    stderr = " ".join(tuned["result"].stderr.split())
-    first = stderr[stderr.index("WARNING:") :]
-    assert first.startswith("WARNING: 2 of 2 force limits swept (1, 1.5 N) are below the force sensing's error bound")
-    assert "4.60 N" in first and str(tuned["calibration"]) in first
-    assert "mm at 1 N" in first and "mm at 1.5 N" in first
-    assert "force limit 3 N" not in stderr
+def test_tune_safety_warns_about_the_grid_limits_not_the_default(tuned_preset: Any, tuned: dict[str, Any]) -> None:
+    """With --grid force_limit_n=1:1.5 the run-start warning names 1 and 1.5 N (and the travel each allows) and the
+    sensing's bound (the preset's, or the calibration file's), never the 3 N default the grid replaces."""
+    for result, bound in ((tuned_preset, "7.21 N (dvrk-calibrated force sensing)"), (tuned["result"], "4.60 N")):
+        stderr = " ".join(result.stderr.split())
+        first = stderr[stderr.index("WARNING:") :]
+        assert first.startswith(
+            "WARNING: 2 of 2 force limits swept (1, 1.5 N) are below the force sensing's error bound " + bound
+        )
+        assert "mm at 1 N" in first and "mm at 1.5 N" in first
+        assert "force limit 3 N" not in stderr
+    assert str(tuned["calibration"]) in " ".join(tuned["result"].stderr.split())
 
 
-def test_nothing_recommended_says_what_would_give_a_recommendation(tuned: dict[str, Any]) -> None:
+def test_nothing_recommended_says_what_would_give_a_recommendation(tuned_preset: Any, tuned: dict[str, Any]) -> None:
     """When every limit within the bound is below the sensing's bound and never succeeded, the verdict suggests a
-    grid above that bound and a calibration with a bound below the user's."""
-    result = tuned["result"]
-    assert result.returncode == 1, result.stdout + result.stderr
-    stdout = " ".join(result.stdout.split())
-    assert "Nothing recommended" in stdout and "What would give a recommendation:" in stdout
-    assert "--grid force_limit_n=6:12 --max-force-n 12" in stdout
-    assert "a calibration whose error_bound_with_acceleration_n is below 1.5 N (this file's is 4.60 N)" in stdout
+    grid above that bound, and a calibration (of the robot, or a better one) with a bound below the user's."""
+    preset, calibrated = (" ".join(r.stdout.split()) for r in (tuned_preset, tuned["result"]))
+    for result, stdout in ((tuned_preset, preset), (tuned["result"], calibrated)):
+        assert "Nothing recommended" in stdout and "What would give a recommendation:" in stdout
+        assert result.returncode == 1
+    assert "--grid force_limit_n=9:18 --max-force-n 18" in preset
+    assert "calibrate the force sensing (calibrate-wrench) and sweep with the robot's own file" in preset
+    assert "--grid force_limit_n=6:12 --max-force-n 12" in calibrated
+    assert "a calibration whose error_bound_with_acceleration_n is below 1.5 N (this file's is 4.60 N)" in calibrated
 
 
 def test_a_calibration_goes_with_dvrk_calibrated_sensing_only(tmp_path: Path) -> None:
