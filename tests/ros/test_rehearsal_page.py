@@ -3,9 +3,9 @@
 The page and the test are one: the test runs the page's marked ``sh`` block command by command, in order, in a
 folder of its own (the page's relative paths land there), on a ROS domain of its own (the page's
 ``export ROS_DOMAIN_ID=...`` takes this test's domain; discovery on localhost). A command ending in ``&`` is
-the console: it runs beside the rest, from its ``next:`` line on. Each command must succeed and end with a
-``next:`` line naming the page's next command, and the page's ``text`` block after it shows those lines as
-they are printed. Waits are on lines and exits; the guards only bound a failure.
+the console: it runs beside the rest, from its start-up line and the ``next:`` line after it on. Each command
+must succeed and end with a ``next:`` line naming the page's next command, and the page's ``text`` block after
+it shows those lines as they are printed. Waits are on lines and exits; the guards only bound a failure.
 """
 
 from __future__ import annotations
@@ -28,6 +28,10 @@ DVRK_PAGE = ROOT / "docs" / "dvrk.md"
 MARKER = "<!-- the path to the robot: tests/ros/test_rehearsal_page.py runs this block -->"
 #: Bounds a step that never ends (a failure), not how long one takes.
 GUARD_S = 600.0
+#: The console's start-up line: it serves every topic and service from then on.
+STARTED = re.compile(r"simulated \S+ at [\d.]+ Hz on ROS_DOMAIN_ID=")
+#: Bounds the wait for a console's next: line after its start-up line (it prints it at once; a failure).
+AFTER_START_S = 60.0
 
 
 def page_block(text: str, marker: str, language: str = "sh") -> str:
@@ -96,13 +100,16 @@ class Lines:
         stream = process.stdout
         threading.Thread(target=lambda: [*map(self._queue.put, stream), self._queue.put(None)], daemon=True).start()
 
-    def until(self, prefix: str) -> str:
-        """The first line starting with ``prefix`` (every line before it kept in ``seen``)."""
+    def until(self, pattern: re.Pattern[str], guard_s: float = GUARD_S) -> str:
+        """The first line ``pattern`` matches (every line before it kept in ``seen``)."""
         while True:
-            line = self._queue.get(timeout=GUARD_S)
-            assert line is not None, "ended before a line starting with " + repr(prefix) + ":\n" + "".join(self.seen)
+            try:
+                line = self._queue.get(timeout=guard_s)
+            except queue.Empty:
+                line = None
+            assert line is not None, f"no line matching {pattern.pattern!r}:\n" + "".join(self.seen)
             self.seen.append(line)
-            if line.startswith(prefix):
+            if pattern.search(line):
                 return line.strip()
 
 
@@ -129,7 +136,8 @@ def run_block(commands: list[str], folder: Path, env: dict[str, str]) -> list[tu
                 )
                 lines = Lines(process)
                 consoles.append((process, lines))
-                next_line = lines.until("next: ")
+                lines.until(STARTED)
+                next_line = lines.until(re.compile("^next: "), AFTER_START_S)
                 runs.append((line, "".join(lines.seen), next_line))
                 continue
             done = subprocess.run(argv, cwd=folder, env=env, capture_output=True, text=True, timeout=GUARD_S)
