@@ -174,12 +174,18 @@ def read_calibration(path: str | Path, arm: str | None = None, *, exact_console:
             samples=int(data["samples"]),
             sensing=str(data["sensing"]),
             console=str(data["console"]),
-            **{k: None if data.get(k) is None else float(data[k]) for k in _REGIME_MAXIMA},
+            max_after_retraction_speed_n=_optional_float(data, "max_after_retraction_speed_n"),
+            max_after_without_acceleration_n=_optional_float(data, "max_after_without_acceleration_n"),
         )
     except (AttributeError, KeyError, TypeError, ValueError) as e:
         raise InputFileError(field, path, f"a file this version of calibrate-wrench wrote ({e})") from e
     _check(calibration, str(path), arm, exact_console)
     return calibration
+
+
+def _optional_float(data: dict[str, Any], key: str) -> float | None:
+    """``data[key]`` as a float, None when it is missing or null (a regime the held-out log did not reach)."""
+    return None if data.get(key) is None else float(data[key])
 
 
 def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_console: bool) -> None:

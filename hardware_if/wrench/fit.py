@@ -275,7 +275,10 @@ def _free_space_errors(parameters: np.ndarray, logs: Sequence[PreparedLog]) -> l
     """The free-space error of each parameter vector (the columns of ``parameters``, (columns, k)) on ``logs``,
     in one pass over the logs' regressors, a chunk at a time."""
     k = parameters.shape[1]
-    before, after, live, within = [], [], [], []
+    before: list[np.ndarray] = []
+    after: list[np.ndarray] = []
+    live: list[np.ndarray] = []
+    within: list[np.ndarray] = []
     limits = SafetyConfig().acceleration
     for p in logs:
         effort = p.log.effort * p.joint_mask
