@@ -389,18 +389,14 @@ def _cases(tmp: Path) -> list[Case]:
     np.savez(demos / "steps.npz", **{**good, "obs": good["obs"][:, :10]})
     np.savez(demos / "good.npz", **good)
     whole = (demos / "good.npz").read_bytes()
-    _write(demos / "truncated.npz", whole[: len(whole) // 2])
-    _write(demos / "empty.npz", b"")
-    _write(demos / "text.npz", "not an archive\n")
+    _write(demos / "truncated.npz", whole[: len(whole) // 2])  # an empty or a text file fails as this one does
     _huge_npz(demos / "huge.npz")
     expected_demos = {
         "nan": ("actions", "non-finite"),
         "flat": ("actions", "(10,)", "3 dimensions"),
         "dims": ("obs", "7 values", "the task has 4"),
         "steps": ("obs and achieved_goal", "T + 1"),
-        "truncated": ("--demos-file", "truncated"),
-        "empty": ("--demos-file", "truncated"),
-        "text": ("--demos-file", "not a readable .npz"),
+        "truncated": ("--demos-file", "truncated", "not a readable .npz"),
         "huge": ("--demos-file", "200000000000 bytes", "at most"),
     }
     for name, expect in expected_demos.items():
@@ -580,6 +576,24 @@ def test_every_bad_input_gets_a_named_error_and_loses_nothing(tmp_path: Path, gr
         if c in accepted or c in tracebacks or c in unnamed or c in written
     ]
     assert done and not failures, "\n\n".join(failures)
+
+
+def test_an_empty_or_text_demonstrations_file_is_refused_as_a_truncated_one(tmp_path: Path) -> None:
+    """An empty file and a text file named .npz get the truncated archive's refusal, word for word: the matrix
+    runs the truncated one through the command line (a new check of either is a new row there)."""
+    from policies.demos import load_demos
+    from policies.errors import DemonstrationError
+
+    np.savez(tmp_path / "good.npz", **_toy_demos())
+    whole = (tmp_path / "good.npz").read_bytes()
+    messages = {}
+    for name, data in (("truncated", whole[: len(whole) // 2]), ("empty", b""), ("text", b"not an archive\n")):
+        path = _write(tmp_path / f"{name}.npz", data)
+        with pytest.raises(DemonstrationError) as refused:
+            load_demos(path)
+        messages[name] = str(refused.value).replace(str(path), "PATH")
+    assert messages["empty"] == messages["text"] == messages["truncated"], messages
+    assert "--demos-file PATH: not a readable .npz" in messages["truncated"]
 
 
 def test_a_sweep_rerun_with_another_identity_is_refused(tmp_path: Path) -> None:
