@@ -43,8 +43,8 @@ def test_the_console_column_names_the_console_the_log_came_from(compared: dict[s
     recorded, named, wpi = (compared["logs"][str(p)] for p in compared["paths"])
     expected = ((recorded, "unknown", "logged console"), (named, "sim-dvrk", "sim-dvrk console"))
     for entry, console, column in (*expected, (wpi, "dvrk", "real console")):
-        assert entry["logged_by"]["console"] == console
         assert entry["console"]["columns"][0] == column
+        assert entry["logged_by"]["console"] == console
     stdout = " ".join(compared["stdout"].split())
     assert f"{compared['paths'][0]}: console: unknown (not named: a rosbag2 bag does not say" in stdout
     assert "real console" not in stdout.split(str(compared["paths"][2]))[0]
