@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+from pathlib import Path
 
 import pytest
 
@@ -33,5 +34,26 @@ def test_evaluate_names_the_sweep_of_its_policy(capsys: pytest.CaptureFixture[st
     """evaluate, run to its end, names the robustness sweep of the same policy and task, then the rehearsal."""
     assert main(["evaluate", "--policy", "scripted", "--task", "lift", "--episodes", "1"]) == 0
     last = capsys.readouterr().out.strip().splitlines()[-1]
-    assert last.startswith("next: tissue-retract robustness --policy scripted --task lift --trials 100 "), last
+    sweep = "robustness --policy scripted --task lift --trials 100 --vary stiffness=0.3:3x,size=0.8:1.2x"
+    assert last.startswith(f"next: tissue-retract {sweep} "), last
     assert "tune-safety" in last and "docs/rehearsal-and-reports.md" in last, last
+
+
+@pytest.mark.slow
+def test_the_sweeps_name_the_force_limit_then_the_deploy_of_the_recommendation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """robustness names tune-safety for the same policy and task; tune-safety, with a recommendation, the deploy
+    that loads its recommended_safety.yaml."""
+    sweep = ["--policy", "scripted", "--task", "lift", "--jobs", "1"]
+    vary = ["--trials", "2", "--vary", "stiffness=0.3:3x", "--out", str(tmp_path / "rob")]
+    assert main(["robustness", *sweep, *vary]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("next: tissue-retract tune-safety --policy scripted --task lift --grid "), last
+    grid = ["--grid", "force_limit_n=2:3", "--levels", "1", "--episodes", "1", "--out", str(tmp_path / "tune")]
+    assert main(["tune-safety", *sweep, *grid]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    config = tmp_path / "tune" / "recommended_safety.yaml"
+    assert last.startswith(
+        f"next: tissue-retract deploy --policy scripted --target sim --task lift --safety-config {config} "
+    ), last

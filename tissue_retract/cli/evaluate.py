@@ -266,7 +266,8 @@ def run(args: argparse.Namespace) -> int:
         kept = f"; the {len(results)} finished episodes are in {output}" if output is not None else ""
         print(f"tissue-retract evaluate: interrupted{kept}", file=sys.stderr)
         return interrupted
-    sweep = command("robustness", "--policy", args.policy, "--task", args.task, "--trials", "100")
+    vary = "stiffness=0.3:3x,size=0.8:1.2x"  # the tissue a task's flap stands for (docs/robustness.md)
+    sweep = command("robustness", "--policy", args.policy, "--task", args.task, "--trials", "100", "--vary", vary)
     say_next(
         f"{sweep} (success and force over randomized tissue and timing) or tune-safety (the force limit), then "
         "the rehearsal against sim-dvrk (docs/rehearsal-and-reports.md)"

@@ -43,6 +43,7 @@ from tissue_retract.cli._camera import (
     texture_warning,
 )
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, int_in
+from tissue_retract.cli._next import command, say_next
 from tissue_retract.cli._sensing import (
     SweepSensing,
     add_force_sensing_argument,
@@ -325,6 +326,9 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             status = 1
+    if status == 0:
+        tune = command("tune-safety", "--policy", args.policy, "--task", args.task, "--grid", "force_limit_n=0.5:3")
+        say_next(f"{tune} (the force limit to deploy with), then the rehearsal (docs/rehearsal-and-reports.md)")
     return status
 
 

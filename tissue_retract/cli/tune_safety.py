@@ -40,6 +40,7 @@ from sim.tuning import (
     write_config,
 )
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folder, float_in, int_in
+from tissue_retract.cli._next import command, say_next
 from tissue_retract.cli._sensing import SweepSensing, announce, sweep_sensing
 from tissue_retract.cli.robustness import add_sweep_arguments, calibration_identity, safety_overrides, sweep_identity
 from tissue_retract.workers import TUNING_WORKER, check_sweep_policy
@@ -434,4 +435,9 @@ def run(args: argparse.Namespace) -> int:
     console.print(f"Why: {why}")
     for warning in warnings:
         console.print(f"[bold yellow]WARNING:[/] weak recommendation: {warning}")
-    return 0 if chosen is not None else 1
+    if chosen is None:
+        return 1
+    config = str(out / "recommended_safety.yaml")
+    deploy = ["deploy", "--policy", args.policy, "--target", "sim", "--task", args.task, "--safety-config", config]
+    say_next(f"{command(*deploy)} (the recommendation through the whole chain), then the rehearsal against sim-dvrk")
+    return 0
