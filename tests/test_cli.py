@@ -83,3 +83,10 @@ def test_all_packages_import() -> None:
         check=False,
     )
     assert result.returncode == 0, result.stderr
+
+
+def test_calibrate_wrench_help_names_the_command_that_readies_the_arm() -> None:
+    """``calibrate-wrench --help`` says ``ready-arm`` enables and homes the arm it needs."""
+    result = run_cli("calibrate-wrench", "--help")
+    assert result.returncode == 0, result.stderr
+    assert "tissue-retract ready-arm --arm PSM1` does that" in " ".join(result.stdout.split()), result.stdout

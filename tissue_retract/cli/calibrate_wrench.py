@@ -19,7 +19,7 @@ whole control chain: IK, safety filter, Ruckig, verifier). The first is fitted
 (:mod:`hardware_if.wrench.calibration`), the second held out: the command prints the free-space force error
 of the console's estimate and of the calibrated one on it (RMS and largest, N), and writes the calibration
 to ``--out`` for ``deploy --target dvrk --wrench-calibration F.json``. The arm must be ENABLED and homed
-(``deploy`` or the dVRK's own client does that); nothing may touch the instrument meanwhile.
+(``tissue-retract ready-arm --arm PSM1`` does that); nothing may touch the instrument meanwhile.
 """
 
 from __future__ import annotations
