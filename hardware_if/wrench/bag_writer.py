@@ -113,6 +113,7 @@ def write_joint_bag(
     start_s: float = 0.0,
     space: BagSpace | None = None,
     field: str = "--record",
+    console: str | None = None,
 ) -> Path:
     """Write ``logs`` one after the other as ``/<arm>/measured_js`` into a new MCAP bag folder ``path``.
 
@@ -124,6 +125,8 @@ def write_joint_bag(
         start_s: The first sample's stamp [s].
         space: The room :func:`reserve_bag_space` took for it; None: a hidden folder is made now.
         field: The option that named the bag, for the errors.
+        console: The console that served the arm (``sim-dvrk``, ``dvrk``), kept in the bag's metadata as
+            ``custom_data: console`` so a reader can tell a real arm's log from a simulated one; None: not said.
 
     Raises:
         OutputFileError: ``path`` exists (when ``space`` is None).
@@ -141,6 +144,8 @@ def write_joint_bag(
     written = space.staging / path.name
     try:
         with Writer(written, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            if console is not None:
+                writer.set_custom_data("console", console)
             connection = writer.add_connection(f"/{arm}/measured_js", _MSGTYPE, typestore=typestore)
             for log in logs:
                 for k in range(len(log.t_s)):

@@ -376,7 +376,14 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
             record_error = None
             if args.record is not None:  # kept before the fit, which may refuse to write a calibration
                 try:
-                    write_joint_bag(args.record, args.arm, [fit, held_out], start_s=time.time(), space=space)
+                    write_joint_bag(
+                        args.record,
+                        args.arm,
+                        [fit, held_out],
+                        start_s=time.time(),
+                        space=space,
+                        console=None if console_kind(consoles) == "unknown" else console_kind(consoles),
+                    )
                     print(f"excitation recorded to {args.record} (/{args.arm}/measured_js, both trajectories)")
                 except TissueRetractError as e:  # the fit still runs: the calibration keeps what the arm did
                     record_error = e

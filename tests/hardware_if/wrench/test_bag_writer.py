@@ -67,3 +67,13 @@ def test_a_bag_that_fails_at_the_end_names_the_path_and_leaves_nothing(tmp_path:
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "could not write --record 'bag': File too large (EFBIG); nothing was written there"
     assert os.listdir(tmp_path) == []
+
+
+def test_a_bag_names_the_console_that_served_the_arm(tmp_path: Path) -> None:
+    """A bag written with its console keeps it in metadata.yaml, where bench sensing reads which console it was."""
+    from tissue_retract.cli.bench_sensing import _log_console
+
+    named = write_joint_bag(tmp_path / "named", "PSM1", [_log(200)], console="sim-dvrk")
+    unnamed = write_joint_bag(tmp_path / "unnamed", "PSM1", [_log(200)])
+    assert _log_console(named, "rosbag2")[0] == "sim-dvrk"
+    assert _log_console(unnamed, "rosbag2")[0] == "unknown"
