@@ -151,8 +151,10 @@ def _mcap(path: Path, *chunks: bytes, library: str = "tissue-retract", profile: 
     return path
 
 
-def _bomb(count: int, compression: str = "zstd", claimed: int | None = None, **header: str) -> Callable[[Path], Path]:
-    return lambda path: _mcap(path, _empty_messages_chunk(count, compression, claimed), **header)
+def _bomb(
+    count: int, compression: str = "zstd", claimed: int | None = None, topic: str = "/deploy/measured", **header: str
+) -> Callable[[Path], Path]:
+    return lambda path: _mcap(path, _empty_messages_chunk(count, compression, claimed, topic), **header)
 
 
 def _count_bomb(path: Path) -> Path:
@@ -248,7 +250,7 @@ ROWS = [
     Row("zstd-bomb-lying", _bomb(10_000_000, claimed=1000), ("the size they state", "states 1000 bytes")),
     Row("lz4-bomb-lying", _bomb(10_000_000, "lz4", claimed=1000), ("the size they state", "states 1000 bytes")),
     Row("record-count-bomb", _count_bomb, (f"at most {MAX_RECORDS} records",)),
-    Row("bag-zstd-bomb", _bomb(10_000_000, library="rosbag2", profile="ros2"),
+    Row("bag-zstd-bomb", _bomb(10_000_000, topic="/PSM1/measured_js", library="rosbag2", profile="ros2"),
         ("chunks of at most 67108864 bytes decompressed",), ("calibrate",)),
     Row("bag-index-to-hidden-chunk", _bag_with_hidden_chunk, ("an index that points at the file's own chunks",),
         ("calibrate",)),
