@@ -207,7 +207,8 @@ def _remedies(calibrated: bool) -> list[str]:
     """What a user can change when the sensing cannot tell the limit, for :func:`sensing_warning`."""
     return [
         *([] if calibrated else ["calibrate the force sensing (tissue-retract calibrate-wrench)"]),
-        "declare a narrower tissue stiffness range where the tissue is known (the stiffness bound is 2.64 x the "
-        "stiffest declared Young's modulus times the thickness; a sweep's --vary stiffness=LOW:HIGHx)",
+        "declare the tissue's stiffness where it is known (tissue_stiffness_bound_n_per_m in a --safety-config "
+        "file: 2.64 x the tissue's stiffest Young's modulus times its thickness; a sweep's --vary "
+        "stiffness=LOW:HIGHx)",
         "or raise the limit if the tissue allows it",
     ]

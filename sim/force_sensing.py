@@ -378,12 +378,50 @@ def tissue_bounds(ranges: Mapping[str, tuple[float, float]]) -> tuple[float, flo
     return STIFFNESS_BOUND_PER_E_T * e_pa * t_m, HELD_LOAD_PER_WEIGHT * weight_n
 
 
-def with_sensing(config: SafetyConfig, error_n: float, ranges: Mapping[str, tuple[float, float]]) -> SafetyConfig:
-    """``config`` with a force-sensing error bound [N] and the tissue ranges' bounds (what the filter keeps to)."""
+#: The safety settings that bound the held tissue, and what each bounds (for the messages).
+TISSUE_BOUNDS = {
+    "tissue_stiffness_bound_n_per_m": ("N/m", "the stiffest tissue", "2.64 E t at its stiffest modulus and thickness"),
+    "held_load_bound_n": ("N", "the heaviest tissue", "1.2 x its weight at its largest size, density and thickness"),
+}
+
+
+def declared_tissue_bounds(config: SafetyConfig) -> dict[str, float]:
+    """The tissue bounds ``config`` declares: those set to other than :class:`SafetyConfig`'s defaults (the task
+    flap's). A configuration file that sets one declares what the user knows of the tissue."""
+    defaults = SafetyConfig()
+    return {
+        name: float(getattr(config, name)) for name in TISSUE_BOUNDS if getattr(config, name) != getattr(defaults, name)
+    }
+
+
+def with_sensing(
+    config: SafetyConfig,
+    error_n: float,
+    ranges: Mapping[str, tuple[float, float]],
+    *,
+    tissue_known: bool = True,
+) -> SafetyConfig:
+    """``config`` with a force-sensing error bound [N] and the tissue's bounds (what the filter keeps to).
+
+    A tissue bound ``config`` declares (:func:`declared_tissue_bounds`) is kept. Where the run's tissue is known
+    (``tissue_known``: the simulation draws it from ``ranges``), a declared bound below what those ranges reach
+    is refused: the promise would not hold on the tissue the run draws. Where it is not (a dVRK: ``ranges`` are
+    only the task flap's, assumed), the declaration is the user's word on the tissue and is taken as it is. A
+    bound not declared is the ranges' own (:func:`tissue_bounds`).
+
+    Raises:
+        ConfigurationError: A declared bound below the run's tissue ranges' (``tissue_known`` only).
+    """
     stiffness, load = tissue_bounds(ranges)
-    return dataclasses.replace(
-        config,
-        force_sensing_error_n=float(error_n),
-        tissue_stiffness_bound_n_per_m=stiffness,
-        held_load_bound_n=load,
-    )
+    bounds = {"tissue_stiffness_bound_n_per_m": stiffness, "held_load_bound_n": load}
+    for name, value in declared_tissue_bounds(config).items():
+        unit, what, rule = TISSUE_BOUNDS[name]
+        if tissue_known and value < bounds[name] * (1.0 - 1e-9):
+            raise ConfigurationError(
+                name,
+                value,
+                f"at least {bounds[name]:.4g} {unit}, {what} this run draws ({rule}); leave it out to take "
+                "that, or narrow the tissue's ranges",
+            )
+        bounds[name] = value
+    return dataclasses.replace(config, force_sensing_error_n=float(error_n), **bounds)

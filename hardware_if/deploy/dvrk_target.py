@@ -55,7 +55,8 @@ def deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder
     error_n = options.force_sensing_error_n
     if error_n is None:
         error_n = error_bound_n(sensing_params("dvrk"))
-    config = with_sensing(config, error_n, DEFAULT_RANGES)  # the task flap's ranges: the tissue assumed
+    # The task flap's ranges, the tissue assumed where the configuration declares no bound of its own.
+    config = with_sensing(config, error_n, DEFAULT_RANGES, tissue_known=False)
     # Said before anything reaches the arm: a limit the robot's force sensing cannot tell.
     warn_sensing(
         config, options.force_sensing_source, recorder, echo, calibrated=options.wrench_calibration is not None

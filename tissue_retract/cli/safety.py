@@ -15,6 +15,7 @@ from safety.config import (
     SafetyConfig,
     load_safety_config,
 )
+from sim.force_sensing import TISSUE_BOUNDS, declared_tissue_bounds
 
 __all__ = ["add_arguments", "run"]
 
@@ -82,6 +83,12 @@ def run(args: argparse.Namespace) -> int:
             f"{config.stiffness_prior_n_per_m:g} / {config.stiffness_min_n_per_m:g} / {config.stiffness_max_n_per_m:g}",
         ),
         ("max_translation_m / max_yaw_rad", f"{config.max_translation_m:g} / {config.max_yaw_rad:g}"),
+        *_tissue_rows(config),
+        (
+            "force_sensing_error_n",
+            "set by each run's force sensing: 0 in the simulation's ideal, the preset's or the "
+            "--wrench-calibration file's bound otherwise (printed at the run's start)",
+        ),
         (
             "solver eps / max_iter / hard tol",
             f"{config.solver_eps:g} / {config.solver_max_iter} / {config.hard_tolerance:g}",
@@ -92,3 +99,17 @@ def run(args: argparse.Namespace) -> int:
     console.print(joints)
     console.print(other)
     return 0
+
+
+def _tissue_rows(config: SafetyConfig) -> list[tuple[str, str]]:
+    """The held tissue's bounds in force and where each comes from (declared, or the task flap's)."""
+    declared = declared_tissue_bounds(config)
+    rows = []
+    for name, (unit, _, rule) in TISSUE_BOUNDS.items():
+        value = getattr(config, name)
+        if name in declared:
+            source = "declared: a dVRK deploy keeps it; the simulation keeps it, or refuses it below its own tissue's"
+        else:
+            source = f"the task flap's, {rule}; a simulated run takes its own tissue ranges'"
+        rows.append((name, f"{value:g} {unit} ({source})"))
+    return rows
