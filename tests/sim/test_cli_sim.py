@@ -156,7 +156,7 @@ def test_bench_env_reports_rates(tmp_path: Path) -> None:
 def test_bench_train_times_the_recipe_and_confirms_on_unseen_episodes(tmp_path: Path) -> None:
     """`bench train`: a recipe run per seed, timed from outside, its kept policy scored on unseen episodes."""
     path = tmp_path / "train.json"
-    args = ("--tasks", "lift", "--seeds", "4", "--confirm-episodes", "2", "--budget-s", "10")
+    args = ("--tasks", "lift", "--seeds", "4", "--confirm-episodes", "1", "--budget-s", "10")
     result = _cli("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path))
     assert result.returncode == 0, result.stderr
     (run,) = json.loads(path.read_text())["runs"]
@@ -172,14 +172,14 @@ def test_bench_train_robust_confirms_beside_the_expert_on_the_sweep(tmp_path: Pa
     """`bench train --robust`: train --robust per seed, confirmed on the sweep beside the expert, whose episodes
     the second seed resumes from the first's instead of running them again."""
     path = tmp_path / "train.json"
-    args = ("--robust", "--tasks", "lift", "--seeds", "4", "5", "--confirm-episodes", "2", "--budget-s", "15")
+    args = ("--robust", "--tasks", "lift", "--seeds", "4", "5", "--confirm-episodes", "1", "--budget-s", "10")
     result = _cli("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path))
     assert result.returncode == 0, result.stderr
     runs = json.loads(path.read_text())["runs"]
     for run in runs:
         assert run["exit_status"] == 0 and "recipe robust" in Path(run["log"]).read_text()
         assert run["reached"] == (run["confirmed_success"] >= run["expert_success"] - 0.08)
-        line = f"confirmed {100 * run['confirmed_success']:.1f} % on 2 sweep trials, the expert"
+        line = f"confirmed {100 * run['confirmed_success']:.1f} % on 1 sweep trials, the expert"
         assert line in result.stdout
     task = tmp_path / "runs" / "TissueRetract-Lift-v0"
     first, second = (task / f"s{seed}" / "sweep" / "expert_episodes.jsonl" for seed in (4, 5))
