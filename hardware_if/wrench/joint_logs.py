@@ -18,6 +18,14 @@ Layouts read by :func:`read_joint_log`:
   ``*_results.csv`` of its three-joint scripts (``q, qd, effort`` of yaw, pitch, insertion, 200 Hz). Files
   without a time column: the rate is 250 Hz for a folder whose name says ``250``, else 200 Hz, or ``rate_hz``.
 
+A CSV log carries no time, and a layout's rate is not always the log's: WPI's recording
+script runs its loop at ``sampling_rate * speedscale`` (``run_robot_with_vel.py``), so its ``0.5_scale`` logs are
+100 Hz, not 200. Read at 200 Hz their accelerations were twice the arm's, and a calibration fitted at full speed
+added the inertia they did not have (2.96 -> 2.82 N RMS on the half-speed log; 2.96 -> 1.07 N read at its own
+rate). So without ``rate_hz`` the rate the log's own positions and velocities imply is taken when the arm's three
+outer joints agree on it within :data:`RATE_AGREEMENT` and it is more than :data:`RATE_MISMATCH` from the layout's
+(:attr:`JointLog.rate_note` says so).
+
 Bad logs raise a :class:`JointLogError` subclass that names the file and what is wrong. A file is opened only
 when it is a regular file of at most :data:`MAX_LOG_BYTES` (a FIFO named ``.csv`` would block, a link to
 ``/dev/zero`` never ends), and a CSV log is read to at most :data:`MAX_SAMPLES` rows.
@@ -30,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +57,8 @@ __all__ = [
     "MAX_LOG_BYTES",
     "MAX_SAMPLES",
     "MIN_SAMPLES",
+    "RATE_AGREEMENT",
+    "RATE_MISMATCH",
     "SPEED_FACTOR",
     "ImplausibleLogError",
     "JointLog",
@@ -62,6 +72,7 @@ __all__ = [
     "TooLongLogError",
     "TruncatedLogError",
     "check_free_space_log",
+    "implied_rate_hz",
     "joint_log_from_ticks",
     "read_joint_log",
 ]
@@ -92,6 +103,15 @@ SPEED_FACTOR = 10.0
 #: Largest joint effort a log may show [N m on the revolute joints, N on the insertion]: 20 x the largest on the
 #: public PSMs' logs (5.0 N on the insertion), beyond what the PSM's motors give.
 MAX_EFFORT = 100.0
+#: How closely the yaw, pitch and insertion must agree on the sample rate their positions and velocities imply
+#: (the ratio of the highest to the lowest, less 1) before a CSV log's rate is taken from them: the public WPI
+#: logs' agree within 0.4 %; radiang's three-joint ``results2`` logs differ 2.7 x (their velocities are not the
+#: positions' derivative on every joint), and keep their layout's rate.
+RATE_AGREEMENT = 0.05
+#: How far from its layout's rate a CSV log's implied rate must be to be taken instead (relative): WPI's half-speed
+#: logs imply 0.50 x; a console's velocity filter biases the estimate by a few per cent (radiang's 250 Hz folders
+#: imply 230-234 Hz), which stays with the layout's rate.
+RATE_MISMATCH = 0.25
 #: Smallest spread (standard deviation) of each carried joint's efforts [N m, or N on the insertion]: an arm that
 #: moves under its own dynamics shows at least its motor currents' noise (the public logs' quietest joint, radiang's
 #: roll held at 0, spreads by 4e-4 N m); a console that reports the exact force sends zeros (or a constant).
@@ -160,6 +180,8 @@ class JointLog:
         qd: Joint velocities (N, 6).
         effort: Joint efforts (N, 6) [N m, N].
         joints: How many joints the log carries (3: yaw, pitch, insertion; the rest zero).
+        rate_note: Where a CSV log's sample rate came from when not from its layout or ``rate_hz``, for a user
+            (``100.5 Hz, from its positions and velocities (its layout's 200 Hz does not match them)``); else "".
     """
 
     source: str
@@ -169,6 +191,7 @@ class JointLog:
     qd: np.ndarray
     effort: np.ndarray
     joints: int = 6
+    rate_note: str = ""
 
     @property
     def rate_hz(self) -> float:
@@ -299,26 +322,61 @@ def _rate(path: Path, rate_hz: float | None) -> float:
     return 250.0 if "250" in path.name else 200.0
 
 
+def implied_rate_hz(q: np.ndarray, qd: np.ndarray) -> float | None:
+    """The sample rate a log's positions and velocities imply [Hz], from the yaw, pitch and insertion: per joint,
+    the least-squares ``dt`` in ``(q[k+1] - q[k-1]) / 2 = qd[k] dt``; their median, or None when a joint does not
+    move, its positions do not follow its velocities (less than 90 % of their change explained) or the joints
+    disagree by more than :data:`RATE_AGREEMENT`."""
+    if len(q) < 3:
+        return None
+    change, velocity = (q[2:, :3] - q[:-2, :3]) / 2.0, qd[1:-1, :3]
+    power = np.sum(velocity * velocity, axis=0)
+    if not (np.all(np.isfinite(power)) and np.all(np.isfinite(change)) and np.all(power > 0.0)):
+        return None
+    dt = np.sum(change * velocity, axis=0) / power
+    left = np.sum(np.square(change - velocity * dt), axis=0)
+    if not (np.all(dt > 0.0) and np.all(left <= 0.1 * np.sum(np.square(change), axis=0))):
+        return None
+    rates = 1.0 / dt
+    if rates.max() > (1.0 + RATE_AGREEMENT) * rates.min():
+        return None
+    return float(np.median(rates))
+
+
+def _timed(log: JointLog, rate_hz: float | None, layout_rate_hz: float) -> JointLog:
+    """The log at ``rate_hz`` when given, else at the rate its motion implies when that is far from its layout's
+    (see the module notes), else at the layout's."""
+    rate, note = layout_rate_hz if rate_hz is None else rate_hz, ""
+    if rate_hz is None:
+        implied = implied_rate_hz(log.q, log.qd)
+        if implied is not None and abs(implied / layout_rate_hz - 1.0) > RATE_MISMATCH:
+            rate = implied
+            note = (
+                f"{implied:.1f} Hz, from its positions and velocities (its layout's {layout_rate_hz:g} Hz does not "
+                "match them; --rate sets it)"
+            )
+    return replace(log, t_s=np.arange(len(log.q)) / rate, rate_note=note)
+
+
 def _read_csv(path: Path, rate_hz: float | None) -> JointLog:
     values = _load_csv(path)
     n = len(values)
-    t_s = np.arange(n) / (rate_hz if rate_hz is not None else 200.0)
+    t_s = np.arange(n) / 200.0
     if values.shape[1] == 21:
         q, qd, tau = _from_motor_space(values[:, 0:7], values[:, 7:14], values[:, 14:21])
-        return _checked(JointLog(str(path), "wpi", t_s, q[:, :6], qd[:, :6], tau[:, :6]))
+        return _checked(_timed(JointLog(str(path), "wpi", t_s, q[:, :6], qd[:, :6], tau[:, :6]), rate_hz, 200.0))
     if values.shape[1] == 9:
         pad = np.zeros((n, 3))
-        return _checked(
-            JointLog(
-                str(path),
-                "radiang",
-                t_s,
-                np.hstack([values[:, 0:3], pad]),
-                np.hstack([values[:, 3:6], pad]),
-                np.hstack([values[:, 6:9], pad]),
-                joints=3,
-            )
+        log = JointLog(
+            str(path),
+            "radiang",
+            t_s,
+            np.hstack([values[:, 0:3], pad]),
+            np.hstack([values[:, 3:6], pad]),
+            np.hstack([values[:, 6:9], pad]),
+            joints=3,
         )
+        return _checked(_timed(log, rate_hz, 200.0))
     raise LogLayoutError(
         path, f"{values.shape[1]} columns: a WPI log has 21 (q, qd, tau x 7), a three-joint radiang log 9"
     )
