@@ -211,6 +211,7 @@ def _offline(args: argparse.Namespace) -> int:
     from hardware_if.wrench.fit import (
         bound_verdict,
         check_calibration,
+        coverage_line,
         fit_calibration,
         prepare_log,
         unimproved,
@@ -225,7 +226,9 @@ def _offline(args: argparse.Namespace) -> int:
         if args.json:
             check_output_path(args.json, "--json", (args.check, *args.logs))
         calibration = read_calibration(args.check, exact_console=True)  # checked on logs, not a console
-        error = check_calibration(calibration, prepared(args.logs))
+        logs = prepared(args.logs)
+        error = check_calibration(calibration, logs)
+        print(f"the logs cover {coverage_line(logs)}")
         verdict = bound_verdict(calibration, error)
         summary = error.summary() | verdict
         print(_table(summary))
@@ -260,6 +263,7 @@ def _offline(args: argparse.Namespace) -> int:
     # The public CSV layouts are real PSMs' logs; a bag or a recording may come from any console.
     console = "dvrk" if set(layouts) <= _REAL_PSM_LAYOUTS else "unknown"
     calibration = dataclasses.replace(calibration, sensing=f"logs: {', '.join(layouts)}", console=console)
+    print(f"the logs cover, fitted on: {coverage_line(fit)}; held out: {coverage_line(held_out)}")
     print(f"fitted {len(calibration.parameters)} parameters on {calibration.samples} samples; held out:")
     print(_table(error.summary()))
     print(

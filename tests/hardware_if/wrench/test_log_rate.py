@@ -8,14 +8,21 @@ import numpy as np
 import pytest
 from arm_logs import arm_csv, arm_efforts, motion
 
+from hardware_if.wrench.fit import (
+    MIN_REGIME_SAMPLES,
+    RETRACTION_TIP_SPEED_M_S,
+    coverage_line,
+    fit_calibration,
+    prepare_log,
+)
 from hardware_if.wrench.joint_logs import LND_COUPLING, implied_rate_hz, read_joint_log
 
 
-def _wpi_csv(path: Path, samples: int, rate_hz: float, speed: float) -> Path:
+def _wpi_csv(path: Path, samples: int, rate_hz: float, speed: float, noise: float = 0.002) -> Path:
     """The arm's free-space log along the test motion at ``speed`` x, sampled at ``rate_hz``, as a WPI CSV."""
     q, qd, qdd = motion(samples, 0.3, rate_hz=rate_hz / speed)  # the same path, ``speed`` x as fast
     qd, qdd = qd * speed, qdd * speed**2
-    effort = arm_efforts(q, qd, qdd, noise=0.002)
+    effort = arm_efforts(q, qd, qdd, noise=noise)
     jaw, inverse, columns = np.zeros((samples, 1)), np.linalg.inv(LND_COUPLING), []
     for values, to_motor in ((q, inverse.T), (qd, inverse.T), (effort, LND_COUPLING)):
         full = np.hstack([values, jaw])
@@ -44,3 +51,24 @@ def test_the_rate_is_not_inferred_from_joints_that_disagree() -> None:
     assert implied_rate_hz(q, qd) == pytest.approx(100.0, rel=0.01)
     qd[:, 2] *= 2.0  # the insertion's velocity in other units
     assert implied_rate_hz(q, qd) is None
+
+
+def test_a_held_out_log_with_few_slow_samples_bounds_at_any_speed(tmp_path: Path) -> None:
+    """A fast log held out with fewer than MIN_REGIME_SAMPLES samples at retraction speeds bounds the calibrated
+    error by 1.25 x its largest at any speed; a slow one by 1.25 x its largest at retraction speeds."""
+    for speed, few in ((4.0, True), (1.0, False)):
+        log = prepare_log(read_joint_log(_wpi_csv(tmp_path / f"{speed}.csv", 600, 200.0, speed, noise=0.3)))
+        calibration, error = fit_calibration("PSM1", [log], [log])
+        slow = error.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S
+        assert (np.count_nonzero(slow) < MIN_REGIME_SAMPLES) == few
+        shown = error.after_n.max() if few else error.after_n[slow].max()
+        assert calibration.error_bound_with_acceleration_n == pytest.approx(max(1.25 * shown, 0.5))
+        assert calibration.error_bound_with_acceleration_n > 0.5
+
+
+def test_the_coverage_line_names_speeds_poses_and_the_rate_taken(tmp_path: Path) -> None:
+    """The coverage line names the logs' tip speeds, insertions and outer joints, and a rate taken from motion."""
+    log = prepare_log(read_joint_log(_wpi_csv(tmp_path / "half.csv", 600, 100.0, 0.5)))
+    line = coverage_line([log])
+    assert line.startswith("tip speeds ") and "insertion" in line and "pitch" in line
+    assert "half.csv read at 10" in line
