@@ -424,4 +424,9 @@ def with_sensing(
                 "that, or narrow the tissue's ranges",
             )
         bounds[name] = value
-    return dataclasses.replace(config, force_sensing_error_n=float(error_n), **bounds)
+    return dataclasses.replace(
+        config,
+        force_sensing_error_n=float(error_n),
+        tissue_stiffness_bound_n_per_m=bounds["tissue_stiffness_bound_n_per_m"],
+        held_load_bound_n=bounds["held_load_bound_n"],
+    )
