@@ -206,6 +206,18 @@ def _checked(log: JointLog) -> JointLog:
         raise TooLongLogError(
             log.source, f"at most {MAX_SAMPLES} samples (an hour at 200 Hz; this log has {len(log.t_s)}): split it"
         )
+    _check_finite(log)
+    if not np.all(np.diff(log.t_s) > 0.0):
+        raise LogLayoutError(log.source, "sample times that increase")
+    return log
+
+
+def _check_finite(log: JointLog) -> None:
+    """Refuse a log with a non-finite position, velocity or effort, naming the first.
+
+    Raises:
+        NonFiniteLogError: The first non-finite value, its joint and sample.
+    """
     for name in ("q", "qd", "effort"):
         values = getattr(log, name)
         bad = np.argwhere(~np.isfinite(values))
@@ -214,9 +226,6 @@ def _checked(log: JointLog) -> JointLog:
             raise NonFiniteLogError(
                 log.source, f"{name} of joint {JOINT_NAMES[joint]} is {values[sample, joint]} at sample {sample}"
             )
-    if not np.all(np.diff(log.t_s) > 0.0):
-        raise LogLayoutError(log.source, "sample times that increase")
-    return log
 
 
 def check_free_space_log(log: JointLog, *, min_samples: int = MIN_SAMPLES) -> None:
@@ -238,14 +247,7 @@ def check_free_space_log(log: JointLog, *, min_samples: int = MIN_SAMPLES) -> No
             f"at least {min_samples} samples to filter and fit (this log has {n}; its velocities are filtered at "
             "4 Hz: record a few seconds or more)",
         )
-    for name in ("q", "qd", "effort"):
-        values = getattr(log, name)
-        bad = np.argwhere(~np.isfinite(values))
-        if len(bad):
-            sample, joint = (int(i) for i in bad[0])
-            raise NonFiniteLogError(
-                log.source, f"{name} of joint {JOINT_NAMES[joint]} is {values[sample, joint]} at sample {sample}"
-            )
+    _check_finite(log)
     spec = psm_spec()
     margin = np.asarray(JOINT_RANGE_MARGIN)
     units = ("rad", "rad", "m", "rad", "rad", "rad")
