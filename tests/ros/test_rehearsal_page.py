@@ -160,6 +160,12 @@ def run_block(commands: list[str], folder: Path, env: dict[str, str]) -> list[tu
     return runs
 
 
+#: The page's live calibration needs the machine to itself: sim-dvrk computes the arm's efforts in its simulated
+#: time and stamps them with the wall clock's, which drift apart when the console's ticks come late, and the fit's
+#: held-out error rises with the drift. Measured on the 2-core machine: 2.7-3.2 x lower RMS than the console's
+#: idle, 2.1 x with three busy processes beside it, once 1.48 x among make test's parallel workers, where
+#: calibrate-wrench refuses anything under 1.5 x (and the page's next step then has no file).
+@pytest.mark.idle_machine
 @pytest.mark.slow
 def test_the_rehearsal_page_runs_as_written_and_each_step_names_the_next(
     ros_env: dict[str, str], tmp_path: Path
