@@ -4,7 +4,6 @@ Importing the package registers the Gymnasium environments ``TissueRetract-Lift-
 ``-Target-v0``, ``-MultiSite-v0`` and ``-Expose-v0``.
 """
 
-import sim.quiet_pybullet  # noqa: F401  (first: PyBullet without its build-time line)
-from sim.envs import register as _register
+from sim.registration import register as _register
 
 _register()

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-import pybullet as p
 from scipy.ndimage import gaussian_filter
 
+from sim.quiet_pybullet import pybullet as p
 from sim.rendering import CLASSES
 
 __all__ = ["Appearance", "Endoscope", "StereoFrame", "look_at", "render_stereo"]

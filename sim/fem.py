@@ -18,9 +18,9 @@ tetrahedra).
 from __future__ import annotations
 
 import numpy as np
-import pybullet as p
 
 from psm_control.errors import ConfigurationError
+from sim.quiet_pybullet import pybullet as p
 from sim.tissue import TissueParams, cached_file
 
 __all__ = ["FEM_POISSON_RATIO", "FemSheet", "bullet_lame_parameters", "plate_mesh"]

@@ -23,9 +23,9 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-import pybullet as p
 
 from psm_control.errors import ConfigurationError
+from sim.quiet_pybullet import pybullet as p
 
 __all__ = ["Grasp", "GraspEvents", "GraspParams", "closest_points_on_triangles"]
 

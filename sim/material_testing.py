@@ -30,10 +30,10 @@ from collections.abc import Callable
 from typing import Literal, NamedTuple, get_args
 
 import numpy as np
-import pybullet as p
 
 from sim.fem import FEM_POISSON_RATIO, FemSheet
 from sim.material import LATTICE_POISSON_RATIO
+from sim.quiet_pybullet import pybullet as p
 from sim.tissue import Tissue, TissueParams
 
 __all__ = ["MODELS", "MaterialTest", "Model", "lift", "picture_frame_shear", "uniaxial_tension"]

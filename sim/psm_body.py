@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-import pybullet as p
 
 from psm_control.robot import PsmModel
 from psm_control.urdf import JAW_JOINTS
+from sim.quiet_pybullet import pybullet as p
 
 __all__ = ["PsmBody"]
 

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-import pybullet as p
+
+from sim.quiet_pybullet import pybullet as p
 
 __all__ = ["CLASSES", "Camera", "Frame", "render"]
 

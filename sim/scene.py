@@ -22,13 +22,13 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
-import pybullet as p
 
 from psm_control.errors import ConfigurationError
 from psm_control.robot import PsmConfiguration
 from psm_control.urdf import GRASP_FRAME
 from sim.grasp import Grasp, GraspParams
 from sim.psm_body import PsmBody
+from sim.quiet_pybullet import pybullet as p
 from sim.tissue import Tissue, TissueParams
 
 __all__ = ["FLAP_SAG_MAX_M", "HIDDEN_HALF_EXTENTS_M", "RCM_ABOVE_FLAP_M", "PhysicsParams", "Scene"]

@@ -34,11 +34,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pybullet as p
 
 from psm_control.errors import ConfigurationError
 from sim.material import spring_stiffness_n_per_m
 from sim.mechanics import spring_forces
+from sim.quiet_pybullet import pybullet as p
 
 __all__ = [
     "SITE_NAMES",

@@ -13,8 +13,10 @@ from sim.envs.expose import ExposeEnv
 from sim.envs.lift import LiftEnv
 from sim.envs.multisite import MultiSiteEnv
 from sim.envs.target import TargetEnv
+from sim.registration import MAX_EPISODE_STEPS, register
 
 __all__ = [
+    "MAX_EPISODE_STEPS",
     "TASKS",
     "EnvConfig",
     "ExposeEnv",
@@ -35,16 +37,6 @@ TASKS: dict[str, tuple[str, type[TissueRetractEnv]]] = {
     "expose": ("TissueRetract-Expose-v0", ExposeEnv),
 }
 _ALIASES = {"1": "lift", "i": "lift", "2": "target", "ii": "target", "3": "multisite", "iii": "multisite"}
-
-#: Episode length of every task (the paper's horizon).
-MAX_EPISODE_STEPS = 50
-
-
-def register() -> None:
-    """Register every task with Gymnasium (idempotent)."""
-    for env_id, cls in TASKS.values():
-        if env_id not in gym.registry:
-            gym.register(env_id, entry_point=f"{cls.__module__}:{cls.__name__}", max_episode_steps=MAX_EPISODE_STEPS)
 
 
 def gym_id(task: str) -> str:

@@ -17,7 +17,6 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import pybullet as p
 
 from psm_control.commands import CartesianDelta, MeasuredState
 from psm_control.errors import UnknownVariantError
@@ -34,6 +33,7 @@ from sim.force_sensing import ForceSensor, SensingParams, error_bound_n, sensing
 from sim.grasp import GraspParams
 from sim.mechanics import DamageLimits, grasp_force, measure, spring_strain
 from sim.psm_body import PsmBody
+from sim.quiet_pybullet import pybullet as p
 from sim.randomization import INSERTION_M_PER_RAD, Randomizer
 from sim.rendering import Camera, Frame, render
 from sim.scene import HIDDEN_HALF_EXTENTS_M, PhysicsParams, Scene
