@@ -15,10 +15,13 @@ from typing import Any
 
 from psm_control.errors import ConfigurationError, UnknownVariantError
 
-__all__ = ["ALGORITHMS", "TrainConfig"]
+__all__ = ["ALGORITHMS", "PAPER_TASKS", "TrainConfig"]
 
 #: The algorithms ``tissue-retract train --algo`` knows.
 ALGORITHMS = ("ddpg", "sqil", "ddpgbc", "col", "dex")
+
+#: The seed paper's Tasks I-III -> their Gymnasium ids (``tissue-retract reproduce --tasks``).
+PAPER_TASKS = {"I": "TissueRetract-Lift-v0", "II": "TissueRetract-Target-v0", "III": "TissueRetract-MultiSite-v0"}
 
 
 #: Largest network accepted (from --set or a checkpoint's header): a bound on what loading allocates.

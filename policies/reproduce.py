@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from matplotlib.figure import Figure
 
-from policies.config import ALGORITHMS, TrainConfig
+from policies.config import ALGORITHMS, PAPER_TASKS, TrainConfig
 from policies.errors import ReproductionError
 from policies.trainer import RunSpec, train
 from psm_control import __version__
@@ -64,7 +64,7 @@ __all__ = [
 ]
 
 #: Task label -> Gymnasium id, as in the paper.
-TASKS = {"I": "TissueRetract-Lift-v0", "II": "TissueRetract-Target-v0", "III": "TissueRetract-MultiSite-v0"}
+TASKS = PAPER_TASKS
 
 #: The paper's Table 1: success % (mean, 95 % CI) with 100 demonstrations, by task and algorithm.
 PAPER_TABLE1: dict[str, dict[str, tuple[float, float]]] = {

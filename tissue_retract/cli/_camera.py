@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from psm_control.errors import ConfigurationError, InputFileError
 from psm_control.inputs import check_regular_file
-from sim.tissue import TissueParams
+
+if TYPE_CHECKING:
+    from sim.tissue import TissueParams
 
 __all__ = [
     "add_perception_argument",
@@ -82,6 +84,8 @@ def load_perception(value: str | None) -> Any:
 
 def tissue_params(texture: str | None) -> TissueParams:
     """The flap's settings with the texture file ``--texture`` names (checked)."""
+    from sim.tissue import TissueParams  # PyBullet: only for a command that builds a flap
+
     return TissueParams(texture_path=check_texture(texture) if texture is not None else None)
 
 

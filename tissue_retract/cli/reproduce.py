@@ -14,12 +14,16 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from policies.config import ALGORITHMS
-from policies.reproduce import TASKS, RunOutcome, plan, reproduce
+from policies.config import PAPER_TASKS as TASKS
 from psm_control.errors import ConfigurationError, UnknownVariantError
 from sim.sweep import BACKENDS
 from tissue_retract.cli._checks import MAX_EPISODES, MAX_SEED, check_out_folder, int_in
+
+if TYPE_CHECKING:
+    from policies.reproduce import RunOutcome
 
 __all__ = ["add_arguments", "run"]
 
@@ -68,6 +72,8 @@ def run(args: argparse.Namespace) -> int:
     for make in (False, True):  # both checked before either is made
         check_out_folder(args.out, (), (), make=make)
         check_out_folder(runs_dir, (), (), field="--runs", make=make)
+    from policies.reproduce import plan, reproduce  # torch and matplotlib: only once the arguments are good
+
     runs = plan(
         runs_dir,
         episodes=args.budget,

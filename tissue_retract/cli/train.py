@@ -39,12 +39,11 @@ from typing import Any, NoReturn
 
 import gymnasium as gym
 
-from hardware_if.client.perceived_env import camera_task
 from hardware_if.client.registered_env import RegisteredTask
 from policies.budget import PREPARATION_SHARE
 from policies.config import TrainConfig
 from policies.recipe import DEFAULT_RECIPE, ROBUST_RECIPE, Recipe
-from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, ensure_registered, train
+from policies.registry import ensure_registered
 from psm_control.errors import ConfigurationError
 from sim.drawn_disturbances import DrawnDisturbanceWrapper
 from sim.robustness import TrainingRanges, parse_vary, training_ranges
@@ -187,6 +186,8 @@ def run(args: argparse.Namespace) -> int:
     run_name = args.algo if recipe is None else recipe.name
     out = args.out if args.out is not None else Path("runs") / args.task / f"{run_name}-s{args.seed}"
     wrapper = task_wrapper(args)  # a bad --vary is refused before anything is written
+    from policies.trainer import POLICY_FILE, RESUME_FILE, RunSpec, train  # torch: once the arguments are good
+
     check_out_folder(out, (POLICY_FILE, RESUME_FILE, "eval.csv"), (args.demos_file,))
     command = shlex.join(["tissue-retract", *sys.argv[1:]]) if sys.argv[1:2] == ["train"] else _rebuild(args)
     spec = RunSpec(
@@ -283,6 +284,8 @@ def task_wrapper(args: argparse.Namespace) -> Callable[[gym.Env[Any, Any]], gym.
     seen: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
     if args.perception is not None:
         load_perception(args.perception)  # refused here if it is not a model file
+        from hardware_if.client.perceived_env import camera_task  # PyBullet's endoscope: only with --perception
+
         seen = functools.partial(camera_task, model=args.perception.partition(":")[2] or None, for_training=True)
     elif args.blind:
         registration_error_m = args.registration_error_mm / 1000.0
