@@ -14,7 +14,6 @@ from typing import Any
 from policies.shipped import PRETRAINED, pretrained_claim, pretrained_path
 from psm_control.errors import ConfigurationError
 from sim.evaluation import Policy
-from sim.expert import ScriptedExpert
 
 __all__ = ["POLICY_NAMES", "resolve_policy"]
 
@@ -45,6 +44,8 @@ def resolve_policy(spec: str, env: Any, *, allow_other_task: bool = False) -> tu
         CheckpointError: The checkpoint file is not a valid checkpoint or does not fit the environment.
     """
     if spec == "scripted":
+        from sim.expert import ScriptedExpert  # the environments (PyBullet): not for a command's --help
+
         expert = ScriptedExpert(env)
         return expert, expert.reset
     if spec == "random":

@@ -13,7 +13,7 @@ from sim.envs.expose import ExposeEnv
 from sim.envs.lift import LiftEnv
 from sim.envs.multisite import MultiSiteEnv
 from sim.envs.target import TargetEnv
-from sim.registration import MAX_EPISODE_STEPS, register
+from sim.registration import MAX_EPISODE_STEPS, TASK_IDS, gym_id, register
 
 __all__ = [
     "MAX_EPISODE_STEPS",
@@ -31,24 +31,11 @@ __all__ = [
 
 #: Task ids (as the CLI takes them) -> (Gymnasium id, class).
 TASKS: dict[str, tuple[str, type[TissueRetractEnv]]] = {
-    "lift": ("TissueRetract-Lift-v0", LiftEnv),
-    "target": ("TissueRetract-Target-v0", TargetEnv),
-    "multisite": ("TissueRetract-MultiSite-v0", MultiSiteEnv),
-    "expose": ("TissueRetract-Expose-v0", ExposeEnv),
+    "lift": (TASK_IDS["lift"], LiftEnv),
+    "target": (TASK_IDS["target"], TargetEnv),
+    "multisite": (TASK_IDS["multisite"], MultiSiteEnv),
+    "expose": (TASK_IDS["expose"], ExposeEnv),
 }
-_ALIASES = {"1": "lift", "i": "lift", "2": "target", "ii": "target", "3": "multisite", "iii": "multisite"}
-
-
-def gym_id(task: str) -> str:
-    """The Gymnasium id of a task given as a CLI id (``lift``, ``3``, ``III``) or a Gymnasium id."""
-    key = task.strip().lower()
-    key = _ALIASES.get(key, key)
-    if key in TASKS:
-        return TASKS[key][0]
-    for env_id, _ in TASKS.values():
-        if task == env_id:
-            return env_id
-    raise UnknownVariantError("task", task, [*TASKS, *(env_id for env_id, _ in TASKS.values())])
 
 
 def make(task: str, **kwargs: Any) -> Any:

@@ -27,14 +27,13 @@ from policies.shipped import policy_file, variant_for
 from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig, load_safety_config
-from sim.envs import gym_id
 from sim.evaluation import describe_exceedances, describe_stalls
+from sim.registration import gym_id
 from sim.robustness import parse_vary, sweep_ranges
 from sim.stiffness_fifths import by_stiffness_fifth, expert_summary
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success
 from sim.sweep import EpisodeStore, Trial, cap_jobs, file_digest, make_trials, prepare_output, run_trials
-from sim.sweep.report import summarize, write_report
 from tissue_retract.cli._camera import (
     add_perception_argument,
     add_texture_argument,
@@ -51,7 +50,6 @@ from tissue_retract.cli._sensing import (
     announce,
     sweep_sensing,
 )
-from tissue_retract.workers import ROBUSTNESS_WORKER, check_sweep_policy
 
 #: The scripted expert's episodes of the same trials (``--beside-expert``).
 EXPERT_EPISODES = "expert_episodes.jsonl"
@@ -185,6 +183,8 @@ def run(args: argparse.Namespace) -> int:
     overrides = safety_overrides(args.safety_config)
     out = args.out or Path("runs") / f"robustness-{task_id}"
     declared = sweep_ranges((r.name, r.low, r.high, r.relative) for r in ranges)
+    from tissue_retract.workers import ROBUSTNESS_WORKER, check_sweep_policy  # the simulation: checks passed
+
     warning = check_sweep_policy(
         args.policy,
         task_id,
@@ -244,6 +244,8 @@ def run(args: argparse.Namespace) -> int:
     )
     elapsed = time.perf_counter() - started
     expert_records = _beside_expert(args, trials, kwargs, out, jobs)
+    from sim.sweep.report import summarize, write_report  # matplotlib: for the report only
+
     summary = summarize(records)
     ran = len(records) - already
     summary.update(
@@ -342,6 +344,8 @@ def _beside_expert(
     if args.policy == EXPERT:
         print(f"--beside-expert: the policy is the {EXPERT} expert already; no second pass")
         return None
+    from tissue_retract.workers import ROBUSTNESS_WORKER  # the simulation: as in run
+
     return run_trials(
         trials,
         ROBUSTNESS_WORKER,

@@ -14,8 +14,8 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from matplotlib.figure import Figure
 from rich.console import Console
 from rich.table import Table
 
@@ -23,7 +23,7 @@ from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from psm_control.outputs import atomic_path
 from safety.config import MAX_FORCE_LIMIT_N, SafetyConfig
-from sim.envs import gym_id
+from sim.registration import gym_id
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success
 from sim.sweep import EpisodeStore, cap_jobs, parse_ranges, prepare_output, run_trials
@@ -43,7 +43,9 @@ from tissue_retract.cli._checks import MAX_EPISODES, MAX_TRIALS, check_out_folde
 from tissue_retract.cli._next import command, say_next
 from tissue_retract.cli._sensing import SweepSensing, announce, sweep_sensing
 from tissue_retract.cli.robustness import add_sweep_arguments, calibration_identity, safety_overrides, sweep_identity
-from tissue_retract.workers import TUNING_WORKER, check_sweep_policy
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 #: Files tune-safety writes into ``--out``.
 OUTPUTS = ("episodes.jsonl", "sweep.json", "summary.json", "settings.md", "pareto.png", "recommended_safety.yaml")
@@ -87,6 +89,8 @@ def _plot(
     peak above the bound, or no success), by that rule and no other; its limit is a bar joined to its peak,
     so a setting whose peak is left of the bound and whose limit is right of it shows both.
     """
+    from matplotlib.figure import Figure  # only when there is a sweep to plot
+
     figure = Figure(figsize=(6.0, 4.2), dpi=110)
     axis = figure.subplots()
     colours = ["tab:gray" if ok else "tab:red" for ok in eligible]
@@ -251,6 +255,8 @@ def run(args: argparse.Namespace) -> int:
     )
     trials = tuning_trials(ranges, args.levels, args.episodes, seed=args.seed)
     out = args.out or Path("runs") / f"tune-safety-{task_id}"
+    from tissue_retract.workers import TUNING_WORKER, check_sweep_policy  # the simulation: checks passed
+
     # One warning, naming the limits the grid runs (not the configuration's, which a force_limit_n grid replaces).
     sensing_note = check_sweep_policy(
         args.policy,
