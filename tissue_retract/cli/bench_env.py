@@ -12,7 +12,6 @@ import os
 import time
 from pathlib import Path
 
-from sim.envs import make
 from sim.strict_json import write_strict_json
 from tissue_retract.cli._checks import MAX_EPISODES, int_in
 
@@ -44,6 +43,8 @@ def _rate(env: object, steps: int, render: bool) -> tuple[float, float, int]:
 
 def run(args: argparse.Namespace) -> int:
     """Measure and print."""
+    from sim.envs import make  # PyBullet: once the arguments are parsed
+
     env = make(args.task)
     try:
         physics = env.unwrapped.config.physics

@@ -32,8 +32,6 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-import sim.envs
-from hardware_if.client.perceived_env import PerceivedTask
 from hardware_if.client.registered_env import RegisteredTask
 from policies.resolve import POLICY_NAMES, resolve_policy
 from psm_control.errors import ConfigurationError
@@ -127,6 +125,8 @@ def run(args: argparse.Namespace) -> int:
     if args.blind and args.perception is not None:
         raise ConfigurationError("--perception", args.perception, "either --blind or --perception, not both")
     estimator = load_perception(args.perception)
+    import sim.envs  # PyBullet: once the arguments and files are checked
+
     env = sim.envs.make(
         args.task,
         safety=not args.no_safety,
@@ -145,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
     if args.blind:
         env = RegisteredTask(env, registration_error_m=args.registration_error_mm / 1000.0)
     if estimator is not None:
+        from hardware_if.client.perceived_env import PerceivedTask  # PyBullet's endoscope: with --perception
+
         env = PerceivedTask(env, estimator)
     live = None
     if args.live is not None:

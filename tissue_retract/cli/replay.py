@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 
 from hardware_if.recording.replay import load_recording, summarize_recording
-from hardware_if.recording.replay_figure import plot_recording
 from psm_control.inputs import check_output_path
 
 __all__ = ["add_arguments", "run"]
@@ -37,5 +36,7 @@ def run(args: argparse.Namespace) -> int:
     for line in summarize_recording(recording).lines():
         print(line)
     if args.plot:
+        from hardware_if.recording.replay_figure import plot_recording  # matplotlib: only for --plot
+
         print(f"plot: {plot_recording(recording, args.plot)}")
     return 0
