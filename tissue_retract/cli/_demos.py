@@ -13,8 +13,7 @@ from psm_control import __version__
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from psm_control.outputs import atomic_path
-from sim.envs import gym_id, make
-from sim.expert import ScriptedExpert
+from sim.registration import gym_id
 from tissue_retract.cli._camera import tissue_params
 
 __all__ = ["run_episodes"]
@@ -32,6 +31,9 @@ def run_episodes(args: argparse.Namespace) -> int:
         if not args.video.endswith((".gif", ".mp4")):
             raise ConfigurationError("--video", args.video, "a .gif or .mp4 file")
         check_output_path(args.video, "--video", (args.out, args.texture))
+    from sim.envs import make  # PyBullet: once the outputs are checked
+    from sim.expert import ScriptedExpert
+
     env = make(args.task, tissue=tissue_params(args.texture))
     expert = ScriptedExpert(env)
     kept: list[dict[str, Any]] = []

@@ -25,8 +25,6 @@ from psm_control.dh import dh_tool_pose
 from psm_control.robot import PsmModel
 from psm_control.spec import ARMS, TOOLS
 from psm_control.urdf import TOOL_TIP_FRAME
-from sim.psm_body import PsmBody
-from sim.quiet_pybullet import pybullet as p
 from tissue_retract.cli._camera import add_texture_argument
 from tissue_retract.cli._checks import MAX_EPISODES, int_in
 from tissue_retract.cli._demos import run_episodes
@@ -70,6 +68,9 @@ def run(args: argparse.Namespace) -> int:
 
 def run_kinematics(args: argparse.Namespace) -> int:
     """Print the kinematics table."""
+    from sim.psm_body import PsmBody  # PyBullet: only for the cross-check
+    from sim.quiet_pybullet import pybullet as p
+
     model = PsmModel.from_variant(args.arm, args.tool)
     configuration = model.configuration()
     client = p.connect(p.DIRECT)
