@@ -44,7 +44,6 @@ from psm_control.outputs import write_atomic
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
 from safety.config import SafetyConfig
-from sim.envs.base import EnvConfig
 from sim.force_sensing import error_bound_n, sensing_params
 from sim.sweep.stopping import handling
 from tissue_retract.cli._checks import float_in
@@ -69,8 +68,6 @@ _DEADMAN_S = 0.25
 _MAX_HOLDS = 20
 #: A new target for the chain every this many ticks (the policies' 10 Hz at the dVRK's 100 Hz).
 _TICKS_PER_TARGET = 10
-#: The jaws during the excitation: open, as at an episode's start.
-_EXCITATION_JAW_RAD = EnvConfig().jaw_open_rad
 #: Log layouts (:mod:`hardware_if.wrench.joint_logs`) recorded on real PSMs: the public WPI and radiang logs.
 _REAL_PSM_LAYOUTS = {"wpi", "radiang"}
 
@@ -111,8 +108,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_console_arguments(parser, network_help="keep your ROS discovery settings instead of localhost-only")
 
 
+def _excitation_jaw_rad() -> float:
+    """The jaws during the excitation [rad]: open, as at an episode's start."""
+    from sim.envs.base import EnvConfig  # the environments (PyBullet): only when the arm moves
+
+    return float(EnvConfig().jaw_open_rad)
+
+
 def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...], duration_s: float, wait_s: float):
     """Drive one excitation trajectory; return its measurements as a joint log."""
+    jaw_rad = _excitation_jaw_rad()
     local = PsmModel().configuration()
     measured = client.wait_for_measurement(wait_s)
     chain.reset(measured)
@@ -135,7 +140,7 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
             # An arm that fell behind (a slow console) is led back to the wave, within what the chain accepts.
             reach = 0.5 * chain.config.max_translation_m
             step *= min(1.0, reach / max(float(np.linalg.norm(step)), 1e-12))
-            chain.set_target(CartesianDelta(step, yaw, _EXCITATION_JAW_RAD, "local"), measured)
+            chain.set_target(CartesianDelta(step, yaw, jaw_rad, "local"), measured)
         output = chain.tick(measured)
         if output.safety_stop:
             raise RuntimeError(f"the control chain stopped the excitation: {output.reason}")
@@ -173,7 +178,7 @@ def _to_start(client: Any, wait_s: float) -> None:
     """
     from hardware_if.client.arm_pose import return_to_start
 
-    reason = return_to_start(client, PsmModel().home(), wait_s, start_jaw=_EXCITATION_JAW_RAD)
+    reason = return_to_start(client, PsmModel().home(), wait_s, start_jaw=_excitation_jaw_rad())
     if reason:
         raise RuntimeError(f"the arm did not reach the excitation's start: {reason}")
 

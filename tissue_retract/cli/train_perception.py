@@ -34,9 +34,9 @@ from typing import Any
 import imageio.v2 as imageio
 import numpy as np
 
-import sim.envs
 from psm_control.errors import ConfigurationError
 from psm_control.outputs import atomic_path, write_atomic
+from sim.registration import gym_id
 from sim.robustness import TrainingRanges, parse_vary, training_ranges
 from sim.sweep.stopping import handling
 from tissue_retract.cli._camera import check_texture
@@ -96,7 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Train, measure, save and print."""
     started = _command_started_s() if args.command_line.split()[1:2] == ["train-perception"] else time.monotonic()
-    task = sim.envs.gym_id(args.task)
+    task = gym_id(args.task)
     textures = [check_texture(path) for path in args.texture]
     out = Path(args.out)
     vary = _ranges(args.vary)
