@@ -111,7 +111,10 @@ def dvrk_episode(
                     status = client.status
                     sent = not options.dry_run and not status.holding
                     recorder.write("/deploy/measured", measured_payload(measured, client.efforts()))
-                    recorder.write("/deploy/command", command_payload(output, sent, predicted))
+                    recorder.write(
+                        "/deploy/command",
+                        command_payload(output, sent, predicted, chain.force_bound.travel_bound_n),
+                    )
                     account(report, recorder, output)
                     report.commands_sent += int(sent)
                     scene.tick(

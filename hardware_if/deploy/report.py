@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import math
 import signal
 import sys
 from dataclasses import dataclass, field
@@ -181,8 +182,14 @@ def measured_payload(measured: MeasuredState, effort: np.ndarray | None = None) 
     return payload
 
 
-def command_payload(output: ControlOutput, sent: bool, predicted_force_n: float | None = None) -> dict[str, Any]:
-    """A tick's ``/deploy/command`` record: the chain's command, whether it was sent, and why it was changed."""
+def command_payload(
+    output: ControlOutput, sent: bool, predicted_force_n: float | None = None, travel_bound_n: float = math.nan
+) -> dict[str, Any]:
+    """A tick's ``/deploy/command`` record: the chain's command, whether it was sent, and why it was changed.
+
+    ``travel_bound_n`` is the chain's bound on the true force from the grasp point's travel at this tick
+    (:attr:`safety.force_bound.ForceBound.travel_bound_n`) [N]; recorded only where it is in force (finite).
+    """
     command = output.command
     payload = {
         "q": command.q,
@@ -196,6 +203,8 @@ def command_payload(output: ControlOutput, sent: bool, predicted_force_n: float 
     }
     if predicted_force_n is not None:
         payload["predicted_force_n"] = predicted_force_n
+    if math.isfinite(travel_bound_n):
+        payload["travel_bound_n"] = travel_bound_n
     return payload
 
 

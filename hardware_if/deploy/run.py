@@ -32,13 +32,12 @@ force beyond the limit plus the sensing's error bound) and that neither held nor
 """
 
 import contextlib
-import dataclasses
 import signal
-from pathlib import Path
 from typing import Any
 
 from hardware_if.common.errors import HoldError
 from hardware_if.deploy.dvrk_target import deploy_dvrk
+from hardware_if.deploy.meta import recording_meta
 from hardware_if.deploy.options import DeployOptions
 from hardware_if.deploy.report import DeployReport, record_hold
 from hardware_if.deploy.sim_target import deploy_sim
@@ -79,10 +78,7 @@ def _deploy_recorded(options: DeployOptions, report: DeployReport, echo: Any) ->
     with live_view as live, stopper.installed(), Recorder(options.record, mirror=live) as recorder:
         if live is not None:
             echo(f"live: ws://127.0.0.1:{live.port} (open it in the Foxglove app)")
-        meta = {
-            k: (str(v) if isinstance(v, Path | SafetyConfig) else v) for k, v in dataclasses.asdict(options).items()
-        }
-        recorder.write("/deploy/meta", meta)
+        recorder.write("/deploy/meta", recording_meta(options))
         try:
             try:
                 if options.target == "sim":

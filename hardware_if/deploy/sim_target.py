@@ -44,7 +44,8 @@ class _RecordingChain:
         with self._stopper.tick():
             output: ControlOutput = self._chain.tick(measured)
             self._recorder.write("/deploy/measured", measured_payload(measured))
-            self._recorder.write("/deploy/command", command_payload(output, sent=True))
+            travel_bound_n = self._chain.force_bound.travel_bound_n
+            self._recorder.write("/deploy/command", command_payload(output, sent=True, travel_bound_n=travel_bound_n))
             account(self._report, self._recorder, output)
             self._report.commands_sent += 1
             self._report.peak_force_n = max(self._report.peak_force_n, float(np.linalg.norm(measured.force_n)))

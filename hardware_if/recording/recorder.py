@@ -6,12 +6,15 @@ records the same channels as the dVRK one. Log times are the host's wall clock [
 
 Channels (:data:`CHANNELS`):
 
-- ``/deploy/meta``: once, the run's settings (target, policy, arm, rate, dry run, task, safety config).
+- ``/deploy/meta``: once, the run's settings (target, policy, arm, rate, dry run, task, safety config) and
+  the force sensing it used (``sensing``: what the force came from, the error bound the filter was given,
+  the calibration file).
 - ``/deploy/measured``: every control tick, the measurement the chain used (``q``, ``qd``, ``jaw``,
   ``force_n`` in base axes, ``stamp_s``).
 - ``/deploy/command``: every control tick, the chain's joint command (``q``, ``qd``, ``jaw``), whether it
   was ``sent`` (false in a dry run and while the deadman holds), ``safety_stop``, ``reason``,
-  ``interventions`` and the ``predicted_force_n`` of a dry run.
+  ``interventions``, the ``predicted_force_n`` of a dry run and, while the chain bounds the force from the
+  grasp point's travel, that ``travel_bound_n``.
 - ``/deploy/action``: every policy step, ``episode``, ``step``, the 5-D ``action`` and the observation.
 - ``/deploy/event``: episode start/end, safety stops, deadman holds, faults, Ctrl-C (``kind``, ``text``).
 - ``/deploy/report``: once at the end, the run's summary.

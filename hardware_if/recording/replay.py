@@ -19,10 +19,21 @@ from hardware_if.recording.reader import RecordingFileError
 from hardware_if.recording.schema import RecordingMessages, as_float
 from safety.force_watch import FORCE_LIMIT_EXCEEDED, FORCE_LIMIT_STALL
 
-__all__ = ["TICK_GAP_S", "Recording", "RecordingSummary", "answers", "load_recording", "summarize_recording"]
+__all__ = [
+    "NOT_RECORDED",
+    "TICK_GAP_S",
+    "Recording",
+    "RecordingSummary",
+    "answers",
+    "load_recording",
+    "sensing_text",
+    "summarize_recording",
+]
 
 #: Consecutive measurements further apart than this are not one tick and the next (a gap between episodes) [s].
 TICK_GAP_S = 0.5
+#: The sensing line of a recording from before the meta named its sensing.
+NOT_RECORDED = "not recorded (a recording from before deploys recorded their sensing)"
 
 
 @dataclass
@@ -46,6 +57,9 @@ class Recording:
     command_stamp_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     command_jaw: np.ndarray = field(default_factory=lambda: np.zeros(0))
     intervened: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: The chain's bound on the true force from the grasp point's travel, per command [N]; nan where it was not
+    #: in force or not recorded (recordings from before it).
+    travel_bound_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
     actions: int = 0
     #: The file lacked its footer (the run was killed): this is what its complete chunks kept.
     truncated: bool = False
@@ -65,6 +79,7 @@ class RecordingSummary:
     episodes: list[dict[str, Any]]
     dry_run: bool
     target: str
+    sensing: str = NOT_RECORDED
     truncated: bool = False
     invalid_actions: int = 0
     force_limit_exceeded: list[dict[str, Any]] = field(default_factory=list)
@@ -80,6 +95,7 @@ class RecordingSummary:
         )
         out += [
             f"{kind} to {self.target or '?'}: {self.duration_s:.2f} s, {len(self.episodes)} episode(s)",
+            f"force sensing: {self.sensing}",
             f"commands: {self.commands} computed, {self.commands_sent} sent",
             f"safety stop ticks: {self.safety_stop_ticks}; holds: {len(self.holds)}"
             + "".join(f"\n  hold: {h}" for h in self.holds),
@@ -110,6 +126,29 @@ class RecordingSummary:
                 f"peak force {_newtons(e.get('peak_force_n', 0.0))}"
             )
         return out
+
+
+def sensing_text(meta: dict[str, Any]) -> str:
+    """What the meta's ``sensing`` says (:mod:`hardware_if.deploy.meta`): the sensing, the calibration file with its
+    digest and bounds, and the error bound the safety filter was given; :data:`NOT_RECORDED` without one."""
+    sensing = meta.get("sensing")
+    if not isinstance(sensing, dict) or not sensing.get("force_sensing"):
+        return NOT_RECORDED
+
+    def newtons(record: dict[str, Any], key: str) -> str:
+        return _newtons(record[key]) if key in record else "?"
+
+    text = str(sensing["force_sensing"])
+    calibration = sensing.get("wrench_calibration")
+    if isinstance(calibration, dict):
+        text += (
+            f", calibrated by {calibration.get('path') or '?'} (sha256 {calibration.get('sha256') or '?'}; error "
+            f"bound {newtons(calibration, 'error_bound_n')}, "
+            f"{newtons(calibration, 'error_bound_with_acceleration_n')} with the acceleration)"
+        )
+    elif meta.get("target") == "sim":
+        text += " (simulated)"
+    return f"{text}; the safety filter was given a sensing error of {newtons(sensing, 'force_sensing_error_n')}"
 
 
 def _newtons(value: Any) -> str:
@@ -156,6 +195,7 @@ def load_recording(path: str | Path) -> Recording:
             floats["cj"].append(as_float(payload.get("jaw")))
             flags["int"].append(bool(payload.get("interventions")))
             floats["pf"].append(as_float(payload.get("predicted_force_n")))
+            floats["tb"].append(as_float(payload.get("travel_bound_n")))
         elif topic == "/deploy/action":
             rec.actions += 1
     rec.truncated = messages.truncated
@@ -179,6 +219,7 @@ def load_recording(path: str | Path) -> Recording:
         rec.predicted_force_n = np.frombuffer(floats["pf"])[order]
         rec.command_stamp_s, rec.command_jaw = np.frombuffer(floats["cs"])[order], np.frombuffer(floats["cj"])[order]
         rec.intervened = np.array(flags["int"], dtype=bool)[order]
+        rec.travel_bound_n = np.frombuffer(floats["tb"])[order]
     return rec
 
 
@@ -225,6 +266,7 @@ def summarize_recording(rec: Recording) -> RecordingSummary:
         episodes=episodes,
         dry_run=bool(rec.meta.get("dry_run", False)),
         target=str(rec.meta.get("target", "")),
+        sensing=sensing_text(rec.meta),
         truncated=rec.truncated,
         invalid_actions=int(invalid),
         force_limit_exceeded=exceeded,

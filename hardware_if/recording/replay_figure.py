@@ -4,7 +4,11 @@ Each episode is drawn on its own clock (the simulation's, or the arm's, from the
 the episodes end to end with a boundary and a label (episode, seed, result) between them, so the gaps of
 homing and resets between episodes take no room. Four panels share that axis:
 
-- the retraction force's magnitude with the force limit as a line (and, in a dry run, the predicted force);
+- the retraction force's magnitude with the force limit as a line: the measured force in the band of the
+  sensing's error bound the recording's meta names (none for exact sensing; the true force lies within it),
+  the chain's travel bound on the true force where it was in force (:mod:`safety.force_bound`), the
+  force-limit events (an excursion above the limit, a stall the limit caused) as marks, and, in a dry run,
+  the predicted force;
 - the jaw angle, commanded and measured;
 - the tool tip's tracking error, from forward kinematics of the command of one tick and the measurement
   of the next (the arm's answer to it) [mm];
@@ -24,8 +28,17 @@ from matplotlib.figure import Figure
 from hardware_if.recording.replay import Recording, answers
 from psm_control.outputs import atomic_path
 from psm_control.robot import PsmModel
+from safety.force_watch import FORCE_LIMIT_EXCEEDED, FORCE_LIMIT_STALL
 
-__all__ = ["LAYOUT_KEY", "EpisodeSpan", "draw_recording", "episode_spans", "figure_layout", "plot_recording"]
+__all__ = [
+    "LAYOUT_KEY",
+    "EpisodeSpan",
+    "draw_recording",
+    "episode_spans",
+    "figure_layout",
+    "plot_recording",
+    "sensing_error_n",
+]
 
 #: Events that stopped commanding.
 _HOLD_KINDS = ("hold", "deadman", "interrupted")
@@ -121,13 +134,17 @@ def plot_recording(rec: Recording, out: str | Path) -> Path:
 
 
 def draw_recording(rec: Recording) -> Figure:
-    """The figure: force with its limit, jaw, tip tracking error and filter events, per episode."""
+    """The figure: force with its sensing error band, limit, travel bound and force-limit events; jaw, tip
+    tracking error and filter events; per episode."""
     spans = episode_spans(rec)
     force_limit_n = rec.report.get("force_limit_n")
     tip_error = _tip_error_mm(rec)
     figure = Figure(figsize=(7.2, 7.0), dpi=200)
     axes = figure.subplots(4, 1, sharex=True, gridspec_kw={"height_ratios": [3, 2, 2, 1.2]})
     force_ax, jaw_ax, error_ax, event_ax = axes
+    error_n = sensing_error_n(rec)
+    travel = rec.travel_bound_n if len(rec.travel_bound_n) == len(rec.command_t) else None
+    drawn_travel = False
     for k, span in enumerate(spans):
         first = k == 0
         measured = (rec.measured_t >= span.start_t) & (rec.measured_t < span.end_t)
@@ -137,10 +154,19 @@ def draw_recording(rec: Recording) -> Figure:
         zero = float(_clock(rec.measured_stamp_s[measured], rec.measured_t[measured])[0])
         x_meas = _on_axis(span, rec.measured_t[measured], rec.measured_stamp_s[measured], zero)
         x_cmd = _on_axis(span, rec.command_t[command], rec.command_stamp_s[command], zero)
-        force_ax.plot(
-            x_meas, np.linalg.norm(rec.force_n[measured], axis=1), color="tab:blue", lw=1.0,
-            label="measured |force|" if first else None,
-        )  # fmt: skip
+        force = np.linalg.norm(rec.force_n[measured], axis=1)
+        force_ax.plot(x_meas, force, color="tab:blue", lw=1.0, label="measured |force|" if first else None)
+        if error_n > 0.0:
+            force_ax.fill_between(
+                x_meas, np.maximum(force - error_n, 0.0), force + error_n, color="tab:blue", alpha=0.15, lw=0,
+                label=f"sensing error \u00b1{error_n:.3g} N (the true force lies within)" if first else None,
+            )  # fmt: skip
+        if travel is not None and np.isfinite(travel[command]).any():
+            force_ax.plot(
+                x_cmd, travel[command], color="tab:green", lw=1.0, ls="-.",
+                label="travel bound (held load + stiffness x travel)" if not drawn_travel else None,
+            )  # fmt: skip
+            drawn_travel = True
         predicted = rec.predicted_force_n[command]
         if np.isfinite(predicted).any():
             force_ax.plot(
@@ -163,11 +189,15 @@ def draw_recording(rec: Recording) -> Figure:
             va="bottom", ha="left",
         )  # fmt: skip
     _mark_holds(rec, spans, axes)
+    _mark_force_limit_events(rec, spans, force_ax)
     if force_limit_n is not None and np.isfinite(float(force_limit_n)):
         force_ax.axhline(
             float(force_limit_n), color="tab:red", ls="--", lw=1.0, label=f"force limit {float(force_limit_n):g} N"
         )
-    force_ax.set_ylim(bottom=0.0)
+    # The lines and marks decide the scale, not the band: a dVRK's uncalibrated error bound is 100 N and more.
+    drawn = [np.asarray(line.get_ydata(), dtype=float) for line in force_ax.get_lines()]
+    top = max((float(np.nanmax(y)) for y in drawn if np.isfinite(y).any()), default=0.0)
+    force_ax.set_ylim(0.0, 1.15 * top if top > 0.0 else None)
     error_ax.set_ylim(bottom=0.0)
     force_ax.set_ylabel("retraction force [N]")
     jaw_ax.set_ylabel("jaw angle [rad]")
@@ -187,6 +217,55 @@ def draw_recording(rec: Recording) -> Figure:
     )
     figure.tight_layout()
     return figure
+
+
+def sensing_error_n(rec: Recording) -> float:
+    """The sensing error bound the recording's safety filter was given [N]; 0 for exact sensing, and where the
+    recording does not say (before deploys recorded their sensing) or says a non-finite one."""
+    sensing = rec.meta.get("sensing")
+    value = sensing.get("force_sensing_error_n") if isinstance(sensing, dict) else None
+    if value is None or not np.isfinite(float(value)):
+        return 0.0
+    return max(0.0, float(value))
+
+
+def _mark_force_limit_events(rec: Recording, spans: list[EpisodeSpan], ax: Any) -> None:
+    """A mark at each force-limit event: an excursion above the limit at its start and peak, a stall where the
+    chain reported it, at the load holding the tissue cost."""
+    marked: set[str] = set()
+    for event in rec.events:
+        kind = event.get("kind")
+        if kind not in (FORCE_LIMIT_EXCEEDED, FORCE_LIMIT_STALL):
+            continue
+        inside = [s for s in spans if s.start_t <= event["t"] < s.end_t]
+        if not inside:
+            continue
+        span = inside[0]
+        if kind == FORCE_LIMIT_EXCEEDED:  # logged when it ended (in the simulation, at the episode's end)
+            x = span.offset_s + min(max(float(event.get("start_s", 0.0)), 0.0), span.duration_s)
+            y, marker, colour, label = event.get("peak_n"), "v", "tab:red", "force limit exceeded"
+        else:  # logged at the tick that saw it
+            x, y = _x_at(rec, span, event["t"]), event["static_load_n"]
+            marker, colour, label = "s", "tab:purple", "force limit stalled the retraction"
+        if y is None or not np.isfinite(float(y)):
+            y = rec.report.get("force_limit_n")
+        if y is None:
+            continue
+        ax.plot(
+            [x], [float(y)], marker, color=colour, ms=6, mfc="none", mew=1.2,
+            label=label if label not in marked else None,
+        )  # fmt: skip
+        marked.add(label)
+
+
+def _x_at(rec: Recording, span: EpisodeSpan, t: float) -> float:
+    """Where recording time ``t`` [s] lies on the figure's axis: at the episode's last measurement by then."""
+    inside = (rec.measured_t >= span.start_t) & (rec.measured_t < span.end_t)
+    if not inside.any():
+        return span.offset_s
+    clock = _clock(rec.measured_stamp_s[inside], rec.measured_t[inside])
+    k = max(0, int(np.searchsorted(rec.measured_t[inside], t, side="right")) - 1)
+    return span.offset_s + float(clock[k] - clock[0])
 
 
 def _event_raster(ax: Any, x: np.ndarray, flags: np.ndarray, row: int, colour: str, label: str, first: bool) -> None:

@@ -20,7 +20,16 @@ from typing import Any, NamedTuple
 
 from hardware_if.recording.reader import McapMessages, RecordingFileError
 
-__all__ = ["EVENT_FIELDS", "FIELDS", "MAX_JSON_MESSAGE_BYTES", "CheckedMessage", "RecordingMessages", "as_float"]
+__all__ = [
+    "CALIBRATION_FIELDS",
+    "EVENT_FIELDS",
+    "FIELDS",
+    "MAX_JSON_MESSAGE_BYTES",
+    "SENSING_FIELDS",
+    "CheckedMessage",
+    "RecordingMessages",
+    "as_float",
+]
 
 #: Largest JSON message [bytes]. The largest a deploy writes is its report, about 650 bytes per episode:
 #: about 1 MB for an hour of 2.5-s episodes. Parsed JSON takes up to about 50 times its text in memory.
@@ -69,6 +78,7 @@ FIELDS: dict[str, dict[str, tuple[_Kind, bool]]] = {
         "policy": (TEXT, False),
         "task": (TEXT, False),
         "dry_run": (BOOLEAN, False),
+        "sensing": (OBJECT, False),
     },
     "/deploy/measured": {
         "q": (_vector(6), True),
@@ -88,6 +98,7 @@ FIELDS: dict[str, dict[str, tuple[_Kind, bool]]] = {
         "reason": (TEXT, False),
         "interventions": (NAMES, False),
         "predicted_force_n": (NUMBER_OR_NULL, False),
+        "travel_bound_n": (NUMBER_OR_NULL, False),
     },
     "/deploy/action": {},
     "/deploy/event": {
@@ -97,6 +108,21 @@ FIELDS: dict[str, dict[str, tuple[_Kind, bool]]] = {
         "t": (ABSENT, False),
     },
     "/deploy/report": {"force_limit_n": (NUMBER_OR_NULL, False)},
+}
+
+#: The fields of ``/deploy/meta``'s ``sensing`` object (absent in recordings from before it), and of its
+#: ``wrench_calibration`` object, checked as ``sensing.<field>`` and ``sensing.wrench_calibration.<field>``.
+SENSING_FIELDS: dict[str, tuple[_Kind, bool]] = {
+    "force_sensing": (TEXT, False),
+    "force_sensing_error_n": (NUMBER_OR_NULL, False),
+    "source": (TEXT, False),
+    "wrench_calibration": (OBJECT, False),
+}
+CALIBRATION_FIELDS: dict[str, tuple[_Kind, bool]] = {
+    "path": (TEXT, False),
+    "sha256": (TEXT, False),
+    "error_bound_n": (NUMBER_OR_NULL, False),
+    "error_bound_with_acceleration_n": (NUMBER_OR_NULL, False),
 }
 
 #: Per event kind, the fields its readers use beyond :data:`FIELDS`'s ``/deploy/event`` ones.
@@ -111,6 +137,7 @@ EVENT_FIELDS: dict[str, dict[str, tuple[_Kind, bool]]] = {
         "limit_n": (NUMBER, True),
         "duration_s": (NUMBER, True),
         "peak_n": (NUMBER_OR_NULL, False),
+        "start_s": (NUMBER, False),
     },
     "force_limit_stall": {
         "limit_n": (NUMBER, True),
@@ -182,13 +209,25 @@ class RecordingMessages:
         fields = dict(FIELDS.get(topic, {}))
         if topic == "/deploy/event" and isinstance(payload.get("kind"), str):
             fields.update(EVENT_FIELDS.get(payload["kind"], {}))
+        self._check(topic, index, payload, fields)
+        sensing = payload.get("sensing") if topic == "/deploy/meta" else None
+        if isinstance(sensing, dict):
+            self._check(topic, index, sensing, SENSING_FIELDS, "sensing.")
+            if isinstance(sensing.get("wrench_calibration"), dict):
+                self._check(
+                    topic, index, sensing["wrench_calibration"], CALIBRATION_FIELDS, "sensing.wrench_calibration."
+                )
+        return payload
+
+    def _check(
+        self, topic: str, index: int, payload: dict[str, Any], fields: dict[str, tuple[_Kind, bool]], prefix: str = ""
+    ) -> None:
         for key, (kind, required) in fields.items():
             if key not in payload:
                 if required:
-                    raise self.error(topic, index, key, f"{kind.allowed}; it is missing")
+                    raise self.error(topic, index, prefix + key, f"{kind.allowed}; it is missing")
             elif not kind.test(payload[key]):
-                raise self.error(topic, index, key, f"{kind.allowed}; it is {_shown(payload[key])}")
-        return payload
+                raise self.error(topic, index, prefix + key, f"{kind.allowed}; it is {_shown(payload[key])}")
 
 
 def as_float(value: Any) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import re
 import signal
 import subprocess
@@ -15,6 +16,7 @@ import rclpy
 from ros_process import start_sim_dvrk, stop, wait_until
 
 from hardware_if.client.psm_client import PsmClient
+from hardware_if.recording.replay import load_recording
 from hardware_if.wrench.calibration import WrenchCalibration, read_calibration
 from hardware_if.wrench.fit import MIN_IMPROVEMENT
 from hardware_if.wrench.joint_logs import read_joint_log
@@ -123,7 +125,8 @@ def test_calibrate_wrench_needs_an_enabled_arm(ros_env: dict[str, str], tmp_path
 def test_a_calibration_that_overflows_holds_the_arm_and_replay_reads_the_recording(
     ros_env: dict[str, str], tmp_path: Path
 ) -> None:
-    """Finite but huge parameters give a force that is no measurement: a named hold, nothing sent, a readable run."""
+    """Finite but huge parameters give a force that is no measurement: a named hold, nothing sent, a readable run
+    whose meta names the sensing the deploy used: dvrk-calibrated, with the file, its digest and its bounds."""
     offset_column = EffortRegressor().friction_start + 3 * 2 + 2  # the insertion's effort offset
     calibration = WrenchCalibration("PSM1", (offset_column,), (1e300,), 1.0, 1.0, 1.0, 2.0, 0.1, 0.2, 1000)
     calibration.write(tmp_path / "wrench.json")
@@ -150,6 +153,15 @@ def test_a_calibration_that_overflows_holds_the_arm_and_replay_reads_the_recordi
     )
     assert replay.returncode == 0, replay.stdout + replay.stderr
     assert "hold: invalid data: measured_js effort" in replay.stdout, replay.stdout
+    path = (tmp_path / "wrench.json").resolve()
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    assert (
+        f"force sensing: dvrk-calibrated, calibrated by {path} (sha256 {digest}; error bound 1.000 N, 1.000 N with "
+        "the acceleration); the safety filter was given a sensing error of 1.000 N"
+    ) in replay.stdout, replay.stdout
+    sensing = load_recording(record).meta["sensing"]
+    assert (sensing["force_sensing"], sensing["force_sensing_error_n"]) == ("dvrk-calibrated", 1.0), sensing
+    assert sensing["wrench_calibration"]["path"] == str(path) and sensing["wrench_calibration"]["sha256"] == digest
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

@@ -51,6 +51,7 @@ a real console on another machine pass ``--network`` and the console's domain id
 from __future__ import annotations
 
 import argparse
+import hashlib
 import sys
 import time
 from pathlib import Path
@@ -204,10 +205,14 @@ def run(args: argparse.Namespace) -> int:
     elif args.wrench_calibration is not None:
         raise ConfigurationError("--wrench-calibration", args.wrench_calibration, "dvrk only")
     sensing_error_n, sensing_source, calibration = None, "dvrk measured_cf, uncompensated", None
+    calibration_path, calibration_sha256 = None, None
     if args.wrench_calibration is not None:
         # Refused here, before the recording is opened: another arm's, a bound its own fit contradicts, one
         # fitted on exact forces (see read_calibration).
         calibration = read_calibration(args.wrench_calibration, args.arm)
+        # The recording names the file by its digest too: a path is rewritten by the next calibrate-wrench.
+        calibration_path = Path(args.wrench_calibration).resolve()
+        calibration_sha256 = hashlib.sha256(calibration_path.read_bytes()).hexdigest()  # at most 1 MiB, checked
         # The deploy gives the calibration the chain's commanded acceleration: the bound fitted with one.
         sensing_error_n = calibration.error_bound_with_acceleration_n
         sensing_source = (
@@ -251,6 +256,8 @@ def run(args: argparse.Namespace) -> int:
         force_sensing_error_n=sensing_error_n,
         force_sensing_source=sensing_source,
         wrench_calibration=calibration,
+        wrench_calibration_path=calibration_path,
+        wrench_calibration_sha256=calibration_sha256,
         perception=args.perception,
         image_timeout_s=args.image_timeout,
         endoscope_rig=args.endoscope_rig,
