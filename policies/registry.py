@@ -29,7 +29,7 @@ def ensure_registered(task_id: str) -> str:
     if task_id in gym.registry:
         return task_id
     with contextlib.suppress(ImportError):
-        sim_envs = importlib.import_module("sim.envs")
+        sim_envs = importlib.import_module("sim.registration")  # the ids, without the environments
         if task_id not in gym.registry:
             with contextlib.suppress(UnknownVariantError):
                 return str(sim_envs.gym_id(task_id))

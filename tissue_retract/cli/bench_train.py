@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from policies.recipe import ROBUST_RECIPE
+from sim.registration import gym_id
 from sim.strict_json import write_strict_json
 from sim.sweep.stopping import ChildProcesses
 from tissue_retract.cli._checks import MAX_EPISODES, check_out_folder, float_in, int_in
@@ -86,8 +87,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Train, confirm, print."""
-    from sim.envs import gym_id  # the simulation, after the arguments are known good
-
     tasks = [gym_id(task) for task in args.tasks]
     if args.budget_s is None:
         args.budget_s = ROBUST_RECIPE.budget_s if args.robust else 300.0
