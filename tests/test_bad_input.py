@@ -1,16 +1,17 @@
-"""Bad input through the real command line: a named error, no traceback, nothing accepted, nothing written.
+"""Bad values and bad content through the real command line: a named error, no traceback, nothing written.
 
 Every case runs ``python -m tissue_retract ...`` in a fresh interpreter, as a careless or hostile user would
 type it. Each must exit non-zero, print a message naming the option, field or value and what is allowed,
 print no Python traceback, and leave no output file behind. The cases run in groups (:data:`GROUPS`, one
 test each) and two at a time within a group (the commands are dominated by interpreter and simulation
-start-up); each group's summary line prints the counts.
+start-up); each group's summary line prints the counts. A file that is missing, not a regular file, empty,
+garbage or over its size limit, and an output path that is a folder, a device, a FIFO or an input, are rows of
+the one table of hostile files, ``tests/test_hostile_inputs.py``; here are the files whose content is wrong.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import signal
 import struct
 import subprocess
@@ -108,10 +109,6 @@ def _cases(tmp: Path) -> list[Case]:
     out = tmp / "out"
     cfg = tmp / "cfg"
     cfg.mkdir()
-    zero = cfg / "zero.yaml"
-    zero.symlink_to("/dev/zero")
-    fifo = cfg / "fifo.yaml"
-    os.mkfifo(fifo)
     configs = {
         "bool-force": (_write(cfg / "bool.toml", "force_limit_n = true\n"), ("force_limit_n", "True", "finite number")),
         "string-insertion": (
@@ -135,9 +132,6 @@ def _cases(tmp: Path) -> list[Case]:
         ),
         "short-vector": (_write(cfg / "short.yaml", "velocity_limit: [1.0, 2.0]\n"), ("velocity_limit", "6 finite")),
         "alias-bomb": (_write(cfg / "bomb.yaml", _alias_bomb()), ("alias", "not allowed")),
-        "dev-zero": (zero, ("regular file",)),
-        "fifo": (fifo, ("regular file",)),
-        "oversized": (_write(cfg / "big.yaml", "# " + "x" * 2_000_000 + "\n"), ("at most", "bytes")),
         "unknown-key": (_write(cfg / "unknown.toml", "force_limt_n = 2.0\n"), ("force_limt_n", "known setting")),
         "not-a-mapping": (_write(cfg / "list.yaml", "- 1\n- 2\n"), ("mapping",)),
     }
@@ -174,7 +168,6 @@ def _cases(tmp: Path) -> list[Case]:
             ("bench", "safety", "--json", str(_write(tmp / "a-file", "x") / "safety.json")),
             ("--json", "a path whose folder can be created"),
         ),
-        Case("bench-train-json-folder", ("bench", "train", "--json", str(tmp)), ("--json", "not a folder")),
         Case("bench-chain-seed-negative", ("bench", "chain", "--seed", "-1"), ("--seed", "-1", "[0,")),
         Case("bench-chain-few-ticks", ("bench", "chain", "--ticks", "5"), ("--ticks", "5", "[100,")),
         Case("bench-chain-no-repeats", ("bench", "chain", "--repeats", "0"), ("--repeats", "0", "[1,")),
@@ -305,31 +298,6 @@ def _cases(tmp: Path) -> list[Case]:
             ("--record", "other than the input"),
         ),
         Case(
-            "json-is-a-folder",
-            (*EVALUATE, "--policy", "scripted", "--json", str(tmp)),
-            ("--json", "not a folder"),
-        ),
-        Case(
-            "tune-overwrites-config",
-            (
-                "tune-safety",
-                "--policy",
-                "scripted",
-                *SWEEP,
-                "--grid",
-                "force_limit_n=1:2",
-                "--levels",
-                "1",
-                "--episodes",
-                "1",
-                "--out",
-                str(tmp / "tuned"),
-                "--safety-config",
-                str(tmp / "tuned" / "recommended_safety.yaml"),
-            ),
-            ("--out", "recommended_safety.yaml"),
-        ),
-        Case(
             "jobs-zero",
             ("robustness", "--policy", "scripted", *SWEEP[:2], "--vary", "stiffness=1", "--jobs", "0"),
             ("--jobs", "0"),
@@ -374,8 +342,6 @@ def _cases(tmp: Path) -> list[Case]:
             (tmp / "o5",),
         )
     )
-    (tmp / "tuned").mkdir()
-    _write(tmp / "tuned" / "recommended_safety.yaml", "force_limit_n: 2.0\n")
     # Demonstrations.
     demos = tmp / "demos"
     demos.mkdir()
@@ -426,8 +392,6 @@ def _cases(tmp: Path) -> list[Case]:
         ),
         "nan-weights": (_checkpoint_with(ck, "nan.safetensors", nan_weight), ("non-finite", "actor.")),
         "pickle": (_write(ck / "pickle.pt", b"\x80\x04\x95" + b"\x00" * 64), ("not a safetensors checkpoint",)),
-        "empty": (_write(ck / "empty.safetensors", b""), ("too short",)),
-        "dev-zero": (_symlink(ck / "zero.safetensors", "/dev/zero"), ("regular file",)),
     }
     for name, (path, expect) in checkpoints.items():
         report = out / f"ckpt-{name}.json"
@@ -505,11 +469,6 @@ def _blind_cases(tmp: Path) -> list[Case]:
     ]
 
 
-def _symlink(path: Path, target: str) -> Path:
-    path.symlink_to(target)
-    return path
-
-
 def _run(case: Case) -> Case:
     result = run_cli(*case.argv, timeout=300)
     text = result.stdout + result.stderr
@@ -548,7 +507,7 @@ GROUPS = {
 def test_every_bad_input_case_is_in_a_group(tmp_path: Path) -> None:
     """No case of the matrix falls outside the groups that the next test runs."""
     names = [case.name for case in _cases(tmp_path)]
-    assert len(names) == len(set(names)) >= 58
+    assert len(names) == len(set(names)) >= 51
     assert [n for n in names if sum(n.startswith(GROUPS[g]) for g in GROUPS) != 1] == []
 
 

@@ -109,11 +109,11 @@ def test_the_shipped_models_are_small_and_their_recorded_error_holds_on_other_fr
     assert abs(median - estimator.info["report"]["median_mm"]) < 1.0, (median, estimator.info["report"])
 
 
-@pytest.mark.parametrize("content", [b"", b"not a model at all", b"\x80\x04pickle"])
-def test_anything_but_a_model_file_is_refused(tmp_path: Path, content: bytes) -> None:
-    """Empty files, text and pickles are refused with a CheckpointError, nothing executed."""
+def test_a_pickle_is_refused(tmp_path: Path) -> None:
+    """A pickle is refused with a CheckpointError, nothing executed (an empty or garbage file is a row of
+    tests/test_hostile_inputs.py)."""
     path = tmp_path / "model.safetensors"
-    path.write_bytes(content)
+    path.write_bytes(b"\x80\x04pickle")
     with pytest.raises(CheckpointError):
         load_estimator(path)
 

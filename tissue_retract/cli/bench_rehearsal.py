@@ -44,6 +44,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from safety.config import load_safety_config
 from sim.strict_json import write_strict_json
 from sim.success_interval import describe_success, wilson_interval
 from sim.sweep.stopping import ChildProcesses
@@ -327,6 +328,8 @@ def _peak(episodes: Sequence[dict[str, Any]]) -> float:
 
 def run(args: argparse.Namespace) -> int:
     """Deploy through ROS and evaluate in-process per task and mode; print both; 1 when ROS falls short."""
+    if args.safety_config is not None:  # refused here, before sim-dvrk starts, not by each deploy it starts
+        load_safety_config(args.safety_config)
     domain_id = bench_domain_id(args)
     seeds = [args.seed + k for k in range(args.episodes)]
     rows = []
