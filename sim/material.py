@@ -27,12 +27,15 @@ tensile moduli of the same organ (hundreds of kPa) differ by orders of magnitude
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 from psm_control.errors import ConfigurationError, UnknownVariantError
 
 __all__ = [
     "LATTICE_POISSON_RATIO",
+    "MODELS",
     "PRESETS",
+    "Model",
     "TissuePreset",
     "lattice_modulus_factor",
     "preset",
@@ -41,6 +44,11 @@ __all__ = [
 
 #: In-plane Poisson's ratio of the flap's lattice (see the module docstring).
 LATTICE_POISSON_RATIO = 1.0 / 3.0
+
+#: The models of the flap's material: the simulated mass-spring cloth and PyBullet's FEM plate
+#: (:mod:`sim.material_testing` tests both).
+Model = Literal["spring", "fem"]
+MODELS: tuple[Model, ...] = get_args(Model)
 
 
 def lattice_modulus_factor(resolution: int) -> float:

@@ -27,20 +27,16 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import Literal, NamedTuple, get_args
+from typing import Literal, NamedTuple
 
 import numpy as np
 
 from sim.fem import FEM_POISSON_RATIO, FemSheet
-from sim.material import LATTICE_POISSON_RATIO
+from sim.material import LATTICE_POISSON_RATIO, MODELS, Model
 from sim.quiet_pybullet import pybullet as p
 from sim.tissue import Tissue, TissueParams
 
 __all__ = ["MODELS", "MaterialTest", "Model", "lift", "picture_frame_shear", "uniaxial_tension"]
-
-#: The models of the flap's material: the simulated mass-spring cloth and PyBullet's FEM plate.
-Model = Literal["spring", "fem"]
-MODELS: tuple[Model, ...] = get_args(Model)
 
 _POINTS = 10  # points on the force-strain curve
 _SETTLE_PERIODS = 6.0  # slowest-mode periods of rest at each point

@@ -20,11 +20,9 @@ from __future__ import annotations
 import argparse
 
 from psm_control.inputs import check_output_path
-from sim.fem import FEM_POISSON_RATIO
-from sim.material import LATTICE_POISSON_RATIO, PRESETS, preset
-from sim.material_testing import MODELS, lift, picture_frame_shear, uniaxial_tension
+from sim.material import LATTICE_POISSON_RATIO, MODELS, PRESETS, preset
 from sim.strict_json import write_strict_json
-from sim.tissue import TissueParams
+from sim.tissue_params import TissueParams
 from tissue_retract.cli._checks import float_in, int_in
 
 __all__ = ["add_arguments", "run"]
@@ -84,6 +82,10 @@ def run(args: argparse.Namespace) -> int:
         return _list()
     output = check_output_path(args.json, "--json") if args.json else None
     params = _material(args)
+    # The tests run in PyBullet: loaded once the preset, the material and the output path are accepted.
+    from sim.fem import FEM_POISSON_RATIO
+    from sim.material_testing import lift, picture_frame_shear, uniaxial_tension
+
     model = next(m for m in MODELS if m == args.model)  # argparse's choices, typed
     print(
         f"material: E {params.youngs_modulus_kpa:g} kPa, t {params.thickness_mm:g} mm, "
