@@ -30,8 +30,8 @@ print(sorted(m for m in sys.modules if m.split('.')[0] in {set(HEAVY)!r}))
 """
 
 #: Commands whose argument checks still come after the simulation is imported: their modules need
-#: hardware_if.deploy or sim.envs (PyBullet) for the defaults and choices they offer.
-STILL_HEAVY = {"sim-dvrk", "deploy"}
+#: sim.envs (PyBullet) for the defaults and choices they offer.
+STILL_HEAVY = {"sim-dvrk"}
 
 COMMANDS = [*(c for c in SUBCOMMANDS if c != "bench"), *(f"bench {t}" for t in TARGETS)]
 

@@ -15,10 +15,16 @@ task in-process, and a rehearsal against ``sim-dvrk`` goes through the client as
 project imports them from the modules that define them.
 """
 
-from hardware_if.deploy.options import DeployOptions
-from hardware_if.deploy.report import EXIT_FORCE_LIMIT, EXIT_HOLD, DeployReport
-from hardware_if.deploy.run import deploy
-from hardware_if.deploy.stopping import EXIT_INTERRUPTED, STOP_SIGNALS, Interrupted
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from hardware_if.deploy.options import DeployOptions
+    from hardware_if.deploy.report import EXIT_FORCE_LIMIT, EXIT_HOLD, DeployReport
+    from hardware_if.deploy.run import deploy
+    from hardware_if.deploy.stopping import EXIT_INTERRUPTED, STOP_SIGNALS, Interrupted
 
 __all__ = [
     "EXIT_FORCE_LIMIT",
@@ -30,3 +36,23 @@ __all__ = [
     "Interrupted",
     "deploy",
 ]
+
+#: The module that defines each name. A name is imported on first use: importing one of the room's modules
+#: (the options a command checks) runs this package first, and the runner loads the simulation and the policies.
+_DEFINED_IN = {
+    "DeployOptions": "options",
+    "EXIT_FORCE_LIMIT": "report",
+    "EXIT_HOLD": "report",
+    "DeployReport": "report",
+    "deploy": "run",
+    "EXIT_INTERRUPTED": "stopping",
+    "STOP_SIGNALS": "stopping",
+    "Interrupted": "stopping",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """One of the room's names, from the module that defines it (PEP 562: only for a name not yet set)."""
+    if name not in _DEFINED_IN:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_DEFINED_IN[name]}"), name)

@@ -12,7 +12,7 @@ from hardware_if.common.task_topics import DEFAULT_RIG
 from hardware_if.wrench.calibration import WrenchCalibration
 from psm_control.errors import ConfigurationError
 from safety.config import SafetyConfig
-from sim.tissue import SITE_NAMES
+from sim.tissue_params import SITE_NAMES
 
 __all__ = ["DeployOptions"]
 

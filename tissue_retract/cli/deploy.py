@@ -59,7 +59,6 @@ from pathlib import Path
 from hardware_if.client.registration import read_registration
 from hardware_if.common.task_topics import DEFAULT_RIG
 from hardware_if.deploy.options import DeployOptions
-from hardware_if.deploy.run import deploy
 from hardware_if.wrench.calibration import read_calibration
 from policies.resolve import POLICY_NAMES
 from psm_control.errors import ConfigurationError
@@ -278,6 +277,8 @@ def run(args: argparse.Namespace) -> int:
             f"force sensing: {sensing_source}; the filter trusts the force to {sensing_error_n:.3g} N ({bound})",
             flush=True,
         )
+    from hardware_if.deploy.run import deploy  # the simulation and the policies: once the options are accepted
+
     report = deploy(options, echo=lambda line: print(line, flush=True))
     for line in report.lines():
         print(line)
