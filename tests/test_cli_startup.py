@@ -29,10 +29,6 @@ except SystemExit:
 print(sorted(m for m in sys.modules if m.split('.')[0] in {set(HEAVY)!r}))
 """
 
-#: Commands whose argument checks still come after the simulation is imported: their modules need
-#: sim.envs (PyBullet) for the defaults and choices they offer.
-STILL_HEAVY = {"sim-dvrk"}
-
 COMMANDS = [*(c for c in SUBCOMMANDS if c != "bench"), *(f"bench {t}" for t in TARGETS)]
 
 #: A bad value per command that only ``run`` can refuse (a file, a name), besides argparse's own checks.
@@ -62,13 +58,7 @@ def _heavy_imports(*argv: str) -> tuple[list[str], str]:
     return ast.literal_eval(done.stdout.strip().splitlines()[-1]), done.stderr
 
 
-def _expect_light(command: str) -> list[pytest.MarkDecorator]:
-    if command in STILL_HEAVY:
-        return [pytest.mark.xfail(reason="its module imports the simulation for its defaults", strict=True)]
-    return []
-
-
-@pytest.mark.parametrize("command", [pytest.param(c, marks=_expect_light(c)) for c in COMMANDS])
+@pytest.mark.parametrize("command", COMMANDS)
 def test_an_unknown_option_is_refused_without_heavy_imports(command: str) -> None:
     """``COMMAND --no-such-option`` prints its error before torch, PyBullet, Ray, rclpy or matplotlib load."""
     heavy, stderr = _heavy_imports(*command.split(), "--no-such-option")

@@ -27,7 +27,6 @@ from typing import IO, Any
 
 import numpy as np
 
-import sim.envs
 from hardware_if.common.crtk import periodic_qos
 from hardware_if.common.task_topics import task_topic
 from hardware_if.console.arm_model import ArmSample, WindowedVelocity
@@ -36,9 +35,8 @@ from hardware_if.console.motion import inverse_kinematics
 from psm_control.commands import CartesianDelta, ControlOutput, JointCommand, MeasuredState
 from safety.config import SafetyConfig
 from safety.force_bound import ForceBound
-from sim.scene import PhysicsParams
 from sim.strict_json import strict_dumps
-from sim.tissue import SITE_NAMES, TissueParams
+from sim.tissue_params import SITE_NAMES, TissueParams
 
 __all__ = [
     "JAW_LEVER_M",
@@ -113,6 +111,10 @@ class TaskArm:
     def __init__(
         self, task: str, *, seed: int = 0, max_steps_per_call: int = 6, blind: bool = False, texture: str | None = None
     ) -> None:
+        # The simulation (PyBullet) is loaded for the scene only: sim-dvrk checks its arguments without it.
+        import sim.envs
+        from sim.scene import PhysicsParams
+
         self.blind = blind
         self._jaw = 0.0
         physics = PhysicsParams(substeps=2, control_period_s=TASK_PHYSICS_PERIOD_S)
@@ -455,6 +457,8 @@ class TruthLog:
         self.arm_model = arm_model
         self._file: IO[str] = path.open("w", buffering=1)
         self._start_s = time.monotonic()
+        from sim.scene import PhysicsParams  # loaded with the task's scene already
+
         node.create_timer(PhysicsParams().step_s, self.write)
 
     def write(self) -> None:
