@@ -43,6 +43,16 @@ class ConfigurationError(TissueRetractError, ValueError):
         self.allowed = allowed
         super().__init__(f"{field}={value!r} is not allowed: expected {allowed}")
 
+    def for_field(self, field: str) -> ConfigurationError:
+        """The same refusal of the same value, given as ``field`` (a reader that serves several options names
+        the one it serves by default)."""
+        # Not copy.copy: it calls the class with the exception's args, which subclasses' signatures do not take.
+        other = type(self).__new__(type(self))
+        other.__dict__.update(self.__dict__)
+        other.field = field
+        other.args = (f"{field}={self.value!r} is not allowed: expected {self.allowed}",)
+        return other
+
 
 class InputFileError(ConfigurationError):
     """A file the user named cannot be used: missing, not a regular file, too large, not UTF-8, malformed.

@@ -10,26 +10,40 @@ existing recording without the user's word (:func:`check_output_path`).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from psm_control.errors import InputFileError, OutputFileError
+from psm_control.errors import ConfigurationError, InputFileError, OutputFileError
 
 __all__ = [
     "MAX_CONFIG_BYTES",
     "check_output_path",
     "check_regular_file",
+    "given_as",
     "load_yaml",
     "read_text",
 ]
 
 #: Largest configuration file read [bytes]; the full SafetyConfig is about 1 kB.
 MAX_CONFIG_BYTES = 1_000_000
+
+
+@contextlib.contextmanager
+def given_as(field: str, default: str) -> Iterator[None]:
+    """Name the refusals of a reader that calls its file ``default`` (``--from`` for the joint logs,
+    ``--wrench-calibration`` for calibrations) after the option the file was given as, ``field``."""
+    try:
+        yield
+    except ConfigurationError as e:
+        if e.field != default:
+            raise
+        raise e.for_field(field) from e
 
 
 def check_regular_file(path: str | Path, field: str, max_bytes: int) -> Path:

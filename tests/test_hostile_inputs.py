@@ -336,10 +336,6 @@ ROWS = (*_safety_readers(), *_model_readers(), *_texture_readers(), *_sensing_re
 KNOWN = {
     "deploy-policy": "deploy loads a checkpoint after its recording has started: a bad one is a fault of the run "
     "(the arm held, a recording left), not a refusal before any work",
-    "calibrate-wrench-held-out": "the log readers name every log --from, a --held-out one too",
-    "bench-sensing-held-out": "the log readers name every log --from, a --held-out one too",
-    "calibrate-wrench-check": "the calibration reader names its file --wrench-calibration, a --check one too",
-    "bench-sensing-calibration": "the calibration reader names its file --wrench-calibration, a --calibration one too",
 }
 
 

@@ -49,7 +49,7 @@ from hardware_if.wrench.fit import (
 )
 from hardware_if.wrench.joint_logs import read_joint_log
 from psm_control.errors import ConfigurationError
-from psm_control.inputs import check_output_path, load_yaml, read_text
+from psm_control.inputs import check_output_path, given_as, load_yaml, read_text
 from psm_control.robot import PsmModel
 from sim.force_sensing import ArmResidual, ForceSensor, sensing_params
 from sim.identified_arm import ARM_FILES, IdentifiedArm, identified_arm
@@ -144,7 +144,8 @@ def _write_arm(args: argparse.Namespace) -> tuple[IdentifiedArm, list[str]]:
     if not args.held_out:
         raise ConfigurationError("--held-out", None, "logs of the same arm to measure the residual on")
     fit = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.logs]
-    held_out = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.held_out]
+    with given_as("--held-out", "--from"):
+        held_out = [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in args.held_out]
     calibration, _ = fit_calibration(args.arm, fit, held_out)
     residual = np.concatenate([p.log.effort - p.model_efforts(calibration.parameter_vector()) for p in held_out])
     speed = np.abs(np.concatenate([p.qd for p in held_out]))
@@ -293,10 +294,12 @@ def run(args: argparse.Namespace) -> int:
         arm, paths = _write_arm(args)
     else:
         arm, paths = identified_arm(args.identified_arm), list(args.logs)
-    calibration = read_calibration(args.calibration, exact_console=True) if args.calibration else None
+    with given_as("--calibration", "--wrench-calibration"):
+        calibration = read_calibration(args.calibration, exact_console=True) if args.calibration else None
     results: dict[str, Any] = {"identified_arm": arm.name, "logs": {}}
     for path in paths:
-        log = prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate))
+        with given_as("--held-out" if args.write_arm else "--from", "--from"):  # --write-arm compares on --held-out
+            log = prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate))
         console, said = _log_console(path, log.log.layout)
         print(f"{path}: console: {console} ({said})")
         entry: dict[str, Any] = {

@@ -39,7 +39,7 @@ import numpy as np
 
 from psm_control.commands import CartesianDelta
 from psm_control.errors import ConfigurationError, TissueRetractError
-from psm_control.inputs import check_output_path
+from psm_control.inputs import check_output_path, given_as
 from psm_control.outputs import write_atomic
 from psm_control.robot import PsmModel
 from safety.chain import ControlChain
@@ -224,13 +224,15 @@ def _offline(args: argparse.Namespace) -> int:
     )
     from hardware_if.wrench.joint_logs import MIN_SAMPLES, check_free_space_log, read_joint_log
 
-    def prepared(paths: list[str]) -> list[Any]:
-        return [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in paths]
+    def prepared(paths: list[str], field: str = "--from") -> list[Any]:
+        with given_as(field, "--from"):
+            return [prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate)) for path in paths]
 
     if args.check is not None:
         if args.json:
             check_output_path(args.json, "--json", (args.check, *args.logs))
-        calibration = read_calibration(args.check, exact_console=True)  # checked on logs, not a console
+        with given_as("--check", "--wrench-calibration"):
+            calibration = read_calibration(args.check, exact_console=True)  # checked on logs, not a console
         logs = prepared(args.logs)
         error = check_calibration(calibration, logs)
         print(f"the logs cover {coverage_line(logs)}")
@@ -252,7 +254,7 @@ def _offline(args: argparse.Namespace) -> int:
     output = check_output_path(args.out, "--out", (*args.logs, *(args.held_out or ())))
     logs = [read_joint_log(path, arm=args.arm, rate_hz=args.rate) for path in args.logs]
     if args.held_out:
-        fit, held_out = [prepare_log(log) for log in logs], prepared(args.held_out)
+        fit, held_out = [prepare_log(log) for log in logs], prepared(args.held_out, "--held-out")
     elif len(logs) > 1:
         fit, held_out = [prepare_log(log) for log in logs[:-1]], [prepare_log(logs[-1])]
     else:
