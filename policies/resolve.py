@@ -15,7 +15,7 @@ from policies.shipped import PRETRAINED, pretrained_claim, pretrained_path
 from psm_control.errors import ConfigurationError
 from sim.evaluation import Policy
 
-__all__ = ["POLICY_NAMES", "resolve_policy"]
+__all__ = ["POLICY_NAMES", "names_a_checkpoint", "resolve_policy"]
 
 #: What ``--policy`` accepts, for help texts and error messages.
 POLICY_NAMES = "scripted, random, pretrained, module:callable or a checkpoint path"
@@ -30,6 +30,13 @@ def _no_reset() -> None:
 def _reset_of(policy: Any) -> Callable[[], None]:
     reset = getattr(policy, "reset", None)
     return reset if callable(reset) else _no_reset
+
+
+def names_a_checkpoint(spec: str) -> bool:
+    """Whether ``--policy`` names a checkpoint file: not one of the policies by name nor ``module:callable``."""
+    if spec in ("scripted", "random", PRETRAINED):
+        return False
+    return not (":" in spec and not spec.endswith(_CHECKPOINT_SUFFIXES))
 
 
 def resolve_policy(spec: str, env: Any, *, allow_other_task: bool = False) -> tuple[Policy, Callable[[], None]]:
@@ -56,7 +63,7 @@ def resolve_policy(spec: str, env: Any, *, allow_other_task: bool = False) -> tu
         claim = pretrained_claim(env)
         allow_other_task = allow_other_task or claim.trained_on_task != claim.task_id
         spec = str(pretrained_path(env))
-    if ":" in spec and not spec.endswith(_CHECKPOINT_SUFFIXES):
+    if not names_a_checkpoint(spec):
         module_name, _, attribute = spec.partition(":")
         try:
             target = getattr(importlib.import_module(module_name), attribute)

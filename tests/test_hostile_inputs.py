@@ -333,10 +333,7 @@ ROWS = (*_safety_readers(), *_model_readers(), *_texture_readers(), *_sensing_re
 
 
 #: Rows a command does not yet pass, and why (each fails until its command is fixed; then it is removed here).
-KNOWN = {
-    "deploy-policy": "deploy loads a checkpoint after its recording has started: a bad one is a fault of the run "
-    "(the arm held, a recording left), not a refusal before any work",
-}
+KNOWN: dict[str, str] = {}
 
 
 @dataclass(frozen=True)

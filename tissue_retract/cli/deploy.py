@@ -60,7 +60,7 @@ from hardware_if.client.registration import read_registration
 from hardware_if.common.task_topics import DEFAULT_RIG
 from hardware_if.deploy.options import DeployOptions
 from hardware_if.wrench.calibration import read_calibration
-from policies.resolve import POLICY_NAMES
+from policies.resolve import POLICY_NAMES, names_a_checkpoint
 from psm_control.errors import ConfigurationError
 from psm_control.inputs import check_output_path
 from safety.config import MAX_CONTROL_RATE_HZ, MIN_CONTROL_RATE_HZ, load_safety_config
@@ -223,6 +223,12 @@ def run(args: argparse.Namespace) -> int:
     safety_config = None
     if args.safety_config is not None:
         safety_config = load_safety_config(args.safety_config)
+    if names_a_checkpoint(args.policy):
+        # Read and checked before the recording is opened: a file that is no checkpoint is a refusal, not a fault
+        # of a run that has begun (the arm held, a recording left behind).
+        from policies.checkpoint import load_checkpoint  # torch: only for a checkpoint
+
+        load_checkpoint(args.policy)
     record = Path(args.record) if args.record else _default_record()
     inputs = (args.policy, args.safety_config, args.wrench_calibration, args.registration, args.texture)
     check_output_path(
