@@ -37,6 +37,7 @@ the arm's ranges, efforts that vary on every joint the log carries, enough sampl
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -310,9 +311,13 @@ def _from_motor_space(q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[n
 def _load_csv(path: Path) -> np.ndarray:
     check_regular_file(path, "--from", MAX_LOG_BYTES)
     try:
-        values = np.loadtxt(path, delimiter=",", ndmin=2, max_rows=MAX_SAMPLES + 1)
+        with warnings.catch_warnings():  # an empty file: numpy warns, then the row count below says so
+            warnings.simplefilter("ignore", UserWarning)
+            values = np.loadtxt(path, delimiter=",", ndmin=2, max_rows=MAX_SAMPLES + 1)
     except (OSError, ValueError) as e:
         raise LogLayoutError(path, f"comma-separated numbers ({e})") from e
+    if values.size == 0:
+        raise LogLayoutError(path, "a CSV log with rows of comma-separated numbers (this file has none)")
     if len(values) > MAX_SAMPLES:
         raise TooLongLogError(path, f"at most {MAX_SAMPLES} rows (an hour at 200 Hz): split the log")
     return values
