@@ -49,7 +49,8 @@ class WrenchCalibration:
         error_bound_n: What the calibrated force may still be off by without an acceleration (a deploy's) [N]:
             1.25 x (the largest held-out free-space error at retraction speeds + the inertia allowance).
         error_bound_with_acceleration_n: ... with the acceleration known [N]: 1.25 x the largest held-out
-            free-space error at retraction speeds.
+            free-space error at retraction speeds; a live calibration's is at least 1.25 x that error as a
+            deploy computes it, with the chain's commanded acceleration.
         rms_before_n: Held-out free-space force error of the console's estimate, RMS [N].
         max_before_n: ... and its largest [N].
         rms_after_n: Held-out free-space force error after the calibration, RMS [N].

@@ -60,10 +60,12 @@ from psm_control.robot import PsmModel
 from safety.config import SafetyConfig
 
 __all__ = [
+    "BOUND_MARGIN",
     "CHUNK_SAMPLES",
     "CUTOFF_HZ",
     "DEPTH_BINS_M",
     "MIN_IMPROVEMENT",
+    "MIN_INSERTION_M",
     "MIN_REGIME_SAMPLES",
     "RETRACTION_TIP_SPEED_M_S",
     "SPEED_BINS_M_S",
@@ -81,7 +83,7 @@ __all__ = [
 #: Cut-off of the zero-phase filter on logged velocities [Hz] (WPI's identification filtered at 5.4 Hz).
 CUTOFF_HZ = 4.0
 #: The calibration's error bound over its largest held-out error at retraction speeds.
-_BOUND_MARGIN = 1.25
+BOUND_MARGIN = 1.25
 #: Tool-tip speed up to which a retraction moves [m/s]. A full policy action moves the tip 5 mm along each
 #: axis (``SafetyConfig.max_step_m``) per 10 Hz policy step: at most sqrt(3) x 0.05 = 0.087 m/s, below this.
 #: The public excitation logs run at 0.25-0.42 m/s; only their samples up to this speed set the bound.
@@ -546,7 +548,7 @@ def fit_calibration(
     slow = error.retraction_max_n()
     shown_slow = int(np.count_nonzero(error.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S))
     basis = slow if shown_slow >= MIN_REGIME_SAMPLES else max(slow, float(error.after_n.max()))
-    with_acceleration = max(_BOUND_MARGIN * basis, MIN_BOUND_N)
+    with_acceleration = max(BOUND_MARGIN * basis, MIN_BOUND_N)
     inside, live, _ = error.regimes()["error_bound_n"]
     shown = [float(error.after_n.max()), with_acceleration] + ([float(live[inside].max())] if np.any(inside) else [])
     allowance = inertia_allowance_n(parameters, held_out) if with_dynamics else 0.0
@@ -554,7 +556,7 @@ def fit_calibration(
         arm=arm,
         columns=tuple(int(c) for c in columns),
         parameters=tuple(float(v) for v in values),
-        error_bound_n=max(_BOUND_MARGIN * (basis + allowance), *shown),
+        error_bound_n=max(BOUND_MARGIN * (basis + allowance), *shown),
         error_bound_with_acceleration_n=with_acceleration,
         rms_before_n=FreeSpaceError._rms(error.before_n),
         max_before_n=float(error.before_n.max()),

@@ -80,6 +80,11 @@ def test_calibrate_wrench_fits_the_arm_or_refuses_by_name(
         assert calibration.rms_before_n == pytest.approx(before, abs=1e-3)
         assert 0.0 < calibration.error_bound_with_acceleration_n <= calibration.error_bound_n
         assert calibration.max_after_n <= calibration.error_bound_n
+        # The bound a deploy trusts covers the held-out error as a deploy computes it (the chain's commanded
+        # acceleration, the console's velocity), not only as the fit does.
+        deployed = re.search(r"as a deploy computes it .*?: largest held-out error ([\d.]+) N", result.stdout)
+        assert deployed is not None, output
+        assert calibration.error_bound_with_acceleration_n >= 1.25 * float(deployed.group(1)) - 1e-3, output
     else:
         assert result.returncode == 1 and not out.exists(), output
         assert "a calibration must be at least 1.5 x lower" in result.stderr, output

@@ -32,6 +32,7 @@ import shlex
 import signal
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -115,15 +116,19 @@ def _excitation_jaw_rad() -> float:
     return float(EnvConfig().jaw_open_rad)
 
 
-def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...], duration_s: float, wait_s: float):
-    """Drive one excitation trajectory; return its measurements as a joint log."""
+def _trajectory(
+    client: Any, chain: ControlChain, frequencies: tuple[float, ...], duration_s: float, wait_s: float
+) -> tuple[Any, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]]:
+    """Drive one excitation trajectory; return its measurements as a joint log, and each sample as a deploy
+    computes its force from it: ``(q, qd, effort, commanded qdd)``, the console's velocity and the acceleration
+    the chain commanded (:func:`_deployed_error`)."""
     jaw_rad = _excitation_jaw_rad()
     local = PsmModel().configuration()
     measured = client.wait_for_measurement(wait_s)
     chain.reset(measured)
     local.update(measured.q)
     start = local.local_pose()[:3, 3].copy()
-    samples = []
+    samples, deployed = [], []
     rate = chain.config.control_rate_hz
     ticks = round(duration_s * rate)
     next_tick = time.monotonic()
@@ -145,6 +150,7 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
         if output.safety_stop:
             raise RuntimeError(f"the control chain stopped the excitation: {output.reason}")
         client.servo_jp(output.command)
+        commanded_qdd = np.asarray(output.command.qdd, dtype=float).copy()
         status = client.status
         if status.holding:  # a late measurement: the arm held; resume from where it is, without the sample
             holds += 1
@@ -164,9 +170,55 @@ def _trajectory(client: Any, chain: ControlChain, frequencies: tuple[float, ...]
             next_tick = time.monotonic()
         measured = client.measure()
         samples.append((measured.stamp_s, np.asarray(measured.q), np.asarray(measured.qd), client.efforts()))
+        deployed.append((samples[-1][1], samples[-1][2], samples[-1][3], commanded_qdd))
     from hardware_if.wrench.joint_logs import joint_log_from_ticks
 
-    return joint_log_from_ticks("calibrate-wrench excitation", "live", samples)
+    return joint_log_from_ticks("calibrate-wrench excitation", "live", samples), deployed
+
+
+def _deployed_error(calibration: Any, deployed: Sequence[tuple[np.ndarray, ...]]) -> tuple[float, int]:
+    """The largest calibrated free-space error as a deploy computes it [N], over the samples at retraction speeds
+    (over all when fewer than ``MIN_REGIME_SAMPLES`` are that slow), and how many samples it was taken over.
+
+    A deploy gives the calibration the console's velocity and the chain's commanded acceleration
+    (:class:`hardware_if.client.arm_listener.ArmListener`), not the filtered ones the fit and its held-out figures
+    use; where the arm's acceleration is not the commanded one (a console whose arm lags or steps), the deploy's
+    error is larger than those figures say. The excitation knows what it commanded, so it measures that error too.
+    """
+    from hardware_if.wrench.fit import MIN_INSERTION_M, MIN_REGIME_SAMPLES, RETRACTION_TIP_SPEED_M_S
+
+    configuration = PsmModel().configuration()
+    errors, speeds = [], []
+    for q, qd, effort, qdd in deployed:
+        if q[2] < MIN_INSERTION_M:
+            continue
+        configuration.update(q)
+        errors.append(float(np.linalg.norm(calibration.force(configuration, qd, effort, qdd))))
+        speeds.append(float(np.linalg.norm(configuration.base_jacobian()[:3] @ qd)))
+    values, slow = np.asarray(errors), np.asarray(speeds) <= RETRACTION_TIP_SPEED_M_S
+    judged = values[slow] if np.count_nonzero(slow) >= MIN_REGIME_SAMPLES else values
+    return (float(judged.max()) if len(judged) else 0.0), len(judged)
+
+
+def _covering_deploys(calibration: Any, deployed: Sequence[tuple[np.ndarray, ...]]) -> tuple[Any, str]:
+    """The calibration with its bounds raised to cover the held-out error as a deploy computes it
+    (:func:`_deployed_error`), and a line saying what was measured."""
+    from hardware_if.wrench.fit import BOUND_MARGIN
+
+    largest, count = _deployed_error(calibration, deployed)
+    needed = BOUND_MARGIN * largest
+    line = (
+        f"as a deploy computes it (the console's velocity, the chain's commanded acceleration): largest held-out "
+        f"error {largest:.3f} N over {count} samples"
+    )
+    if needed <= calibration.error_bound_with_acceleration_n:
+        return calibration, f"{line}, within the bound"
+    raised = dataclasses.replace(
+        calibration,
+        error_bound_with_acceleration_n=needed,
+        error_bound_n=max(calibration.error_bound_n, needed),
+    )
+    return raised, f"{line}: the bounds cover {BOUND_MARGIN:g} x that"
 
 
 def _to_start(client: Any, wait_s: float) -> None:
@@ -375,11 +427,11 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
                     _to_start(client, args.wait)
                     stage = "excitation 1 of 2"
                     print(f"{args.arm}: free space, no tissue in the jaws: {stage} ({args.duration:g} s)", flush=True)
-                    fit = _trajectory(client, chain, _FREQUENCIES_HZ[0], args.duration, args.wait)
+                    fit, _ = _trajectory(client, chain, _FREQUENCIES_HZ[0], args.duration, args.wait)
                     stage = "excitation 2 of 2"
                     print(f"{args.arm}: {stage}, held out ({args.duration:g} s)", flush=True)
                     _to_start(client, args.wait)  # about the same start: the box has room for one swing
-                    held_out = _trajectory(client, chain, _FREQUENCIES_HZ[1], args.duration, args.wait)
+                    held_out, deployed = _trajectory(client, chain, _FREQUENCIES_HZ[1], args.duration, args.wait)
                     consoles = served_by(client, args.arm)  # by now discovery has brought the console's name
                 except (DvrkError, RuntimeError) as e:
                     print(f"tissue-retract calibrate-wrench: error: {e}; the arm holds where it is", file=sys.stderr)
@@ -426,12 +478,14 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
         )
         return 128 + e.signum
     calibration = dataclasses.replace(calibration, sensing="measured_js", console=console_kind(consoles))
+    calibration, deployed_line = _covering_deploys(calibration, deployed)
     print(
         f"free-space force error on the held-out trajectory ({len(held_out.t_s)} samples): "
         f"before RMS {calibration.rms_before_n:.3f} N, max {calibration.max_before_n:.3f} N; "
         f"after RMS {calibration.rms_after_n:.3f} N, max {calibration.max_after_n:.3f} N "
         f"({calibration.rms_before_n / max(calibration.rms_after_n, 1e-12):.1f} x lower RMS)"
     )
+    print(deployed_line)
     print(
         f"error bound for the safety filter: {calibration.error_bound_n:.3f} N "
         f"({calibration.error_bound_with_acceleration_n:.3f} N with the acceleration known)"
