@@ -1,12 +1,13 @@
 """Bad values and bad content through the real command line: a named error, no traceback, nothing written.
 
-Every case runs ``python -m tissue_retract ...`` in a fresh interpreter, as a careless or hostile user would
-type it. Each must exit non-zero, print a message naming the option, field or value and what is allowed,
-print no Python traceback, and leave no output file behind. The cases run in groups (:data:`GROUPS`, one
-test each) and two at a time within a group (the commands are dominated by interpreter and simulation
-start-up); each group's summary line prints the counts. A file that is missing, not a regular file, empty,
-garbage or over its size limit, and an output path that is a folder, a device, a FIFO or an input, are rows of
-the one table of hostile files, ``tests/test_hostile_inputs.py``; here are the files whose content is wrong.
+Every case runs the real command line as a careless or hostile user would type it, in a child forked from this
+process (:mod:`tests.forked_cli`: what ``python -m tissue_retract ...`` would do, without importing torch and the
+simulation again for each). Each must exit non-zero, print a message naming the option, field or value and what
+is allowed, print no Python traceback, and leave no output file behind. The cases run in groups (:data:`GROUPS`,
+one test each) and two at a time within a group; each group's summary line prints the counts. A file that is
+missing, not a regular file, empty, garbage or over its size limit, and an output path that is a folder, a device,
+a FIFO or an input, are rows of the one table of hostile files, ``tests/test_hostile_inputs.py``; here are the
+files whose content is wrong.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import subprocess
 import sys
 import zipfile
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,7 +28,7 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from policies.toy_env import TOY_TASK_ID
-from tests.conftest import run_cli
+from tests.forked_cli import run_forked
 
 PRETRAINED = Path(__file__).resolve().parents[1] / "policies" / "pretrained"
 MULTISITE = PRETRAINED / "TissueRetract-MultiSite-v0.safetensors"
@@ -469,8 +469,7 @@ def _blind_cases(tmp: Path) -> list[Case]:
     ]
 
 
-def _run(case: Case) -> Case:
-    result = run_cli(*case.argv, timeout=300)
+def _outcome(case: Case, result: subprocess.CompletedProcess[str]) -> Case:
     text = result.stdout + result.stderr
     case.outcome = {
         "returncode": result.returncode,
@@ -512,14 +511,13 @@ def test_every_bad_input_case_is_in_a_group(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(1800)  # a few dozen fresh interpreters: a hang guard that a loaded machine stays within
+@pytest.mark.timeout(1800)  # a dozen commands: a hang guard that a loaded machine stays within
 @pytest.mark.parametrize("group", GROUPS)
 def test_every_bad_input_gets_a_named_error_and_loses_nothing(tmp_path: Path, group: str) -> None:
     """Every bad input exits non-zero naming the field and what is allowed, with no traceback and no output."""
     (tmp_path / "policy.safetensors").write_bytes(MULTISITE.read_bytes())
     cases = [case for case in _cases(tmp_path) if case.name.startswith(GROUPS[group])]
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        done = list(pool.map(_run, cases))
+    done = [_outcome(c, r) for c, r in zip(cases, run_forked([c.argv for c in cases]), strict=True)]
     accepted = [c for c in done if c.outcome["returncode"] == 0]
     tracebacks = [c for c in done if c.outcome["traceback"]]
     unnamed = [c for c in done if c.outcome["missing"]]
@@ -559,7 +557,7 @@ def test_a_sweep_rerun_with_another_identity_is_refused(tmp_path: Path) -> None:
     """A robustness rerun into the same --out with another --vary or policy is refused naming the difference."""
     out = tmp_path / "sweep"
     base = ("robustness", "--policy", "scripted", *SWEEP, "--trials", "1", "--out", str(out))
-    first = run_cli(*base, "--vary", "stiffness=1")
+    (first,) = run_forked([(*base, "--vary", "stiffness=1")])
     assert first.returncode == 0, first.stderr
     recorded = json.loads((out / "sweep.json").read_text())
     assert recorded["vary"] == ["stiffness=1:1"] and recorded["episodes"] == 1 and recorded["package_version"]
@@ -571,12 +569,12 @@ def test_a_sweep_rerun_with_another_identity_is_refused(tmp_path: Path) -> None:
             ("policy", "'scripted'", "'random'"),
         ),
     ):
-        again = run_cli(*argv)
+        (again,) = run_forked([argv])
         assert again.returncode != 0 and "Traceback" not in again.stderr
         for word in words:
             assert word in again.stderr, again.stderr
         assert (out / "episodes.jsonl").read_text() == lines  # the first sweep's episodes are kept
-    fresh = run_cli(*base, "--vary", "stiffness=0.1:0.2x", "--fresh")
+    (fresh,) = run_forked([(*base, "--vary", "stiffness=0.1:0.2x", "--fresh")])
     assert fresh.returncode == 0, fresh.stderr
     assert json.loads((out / "sweep.json").read_text())["vary"] == ["stiffness=0.1:0.2x"]
 
@@ -584,7 +582,7 @@ def test_a_sweep_rerun_with_another_identity_is_refused(tmp_path: Path) -> None:
 def test_json_into_a_missing_folder_is_written(tmp_path: Path) -> None:
     """--json into a folder that does not exist yet gets the folder made before the episodes run."""
     report = tmp_path / "new" / "deeper" / "eval.json"
-    result = run_cli(*EVALUATE, "--policy", "scripted", "--json", str(report))
+    (result,) = run_forked([(*EVALUATE, "--policy", "scripted", "--json", str(report))])
     assert result.returncode == 0, result.stderr
     assert json.loads(report.read_text())["summary"]["episodes"] == 1
 
