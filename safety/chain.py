@@ -317,7 +317,8 @@ class ControlChain:
         # An inexact force would teach the estimator its own error as stiffness (safety.force_bound).
         stiffness = self.stiffness.update(held, force) if self.force_bound.exact else self.stiffness.value
         jaw = min(self._jaw, float(measured.jaw))
-        estimate = self.force_bound.update(jaw, held, force, stiffness)
+        # The force was computed with the last command's acceleration (a calibrated dVRK's is: ArmListener).
+        estimate = self.force_bound.update(jaw, held, force, stiffness, current.qdd)
         interventions: tuple[str, ...] = ()
         events: tuple[dict[str, Any], ...] = ()
         intervened = active = 0

@@ -20,6 +20,11 @@ bounds predict with the stiffness bound instead.
 A limit below what the sensing resolves (error bound at or above the limit) is kept by the travel bound
 alone, which stops a retraction after ``(limit - held load) / stiffness bound`` of travel:
 :func:`sensing_warning` says so, with the numbers, at the start of every run.
+
+A calibrated dVRK's error bound holds where its calibration saw the arm move (:class:`SensingRegime`): the
+inertia it identified is known up to the joint accelerations of the logs it was fitted on. On a tick whose
+commanded acceleration (the one the calibration is given) is beyond them, the measured force is trusted only
+to the calibration's wider bound, which takes the inertia as unknown up to the chain's limits.
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import numpy as np
 from safety.config import SafetyConfig
 from safety.limits.retraction_force import CLOSED_JAW_RAD
 
-__all__ = ["ForceBound", "ForceEstimate", "sensing_warning"]
+__all__ = ["ForceBound", "ForceEstimate", "SensingRegime", "sensing_warning"]
 
 #: How long an opened jaw may still hold tissue [s]: two policy steps at the tasks' 10 Hz.
 RELEASE_S = 0.2
@@ -60,6 +65,23 @@ class ForceEstimate(NamedTuple):
     source: str
 
 
+class SensingRegime(NamedTuple):
+    """Where a force sensing's error bound holds (see the module notes).
+
+    Attributes:
+        covered_acceleration: Per joint, the largest acceleration magnitude the bound covers (6,) (rad/s^2;
+            m/s^2 on the insertion; inf: no limit).
+        error_outside_n: The error bound beyond them [N].
+    """
+
+    covered_acceleration: np.ndarray
+    error_outside_n: float
+
+    def covers(self, qdd: np.ndarray) -> bool:
+        """Whether the joint accelerations ``qdd`` (6,) are within the covered ones."""
+        return bool(np.all(np.abs(np.asarray(qdd, dtype=float)) <= self.covered_acceleration))
+
+
 class ForceBound:
     """Chooses, tick by tick, the bound on the true force that leaves the most room (see the module notes).
 
@@ -76,6 +98,7 @@ class ForceBound:
         stiffness_bound_n_per_m: The tissue stiffness bound [N/m].
         held_load_bound_n: The held load at the grasp [N].
         period_s: The control period [s].
+        regime: Where ``error_n`` holds (None: everywhere).
     """
 
     def __init__(
@@ -85,12 +108,18 @@ class ForceBound:
         stiffness_bound_n_per_m: float,
         held_load_bound_n: float,
         period_s: float,
+        regime: SensingRegime | None = None,
     ) -> None:
         self.limit_n = float(limit_n)
         self.error_n = float(error_n)
         self.stiffness_bound_n_per_m = float(stiffness_bound_n_per_m)
         self.held_load_bound_n = float(held_load_bound_n)
         self.period_s = float(period_s)
+        self.regime = regime
+        #: Ticks whose commanded acceleration was beyond the regime (the wider bound taken), since construction.
+        self.ticks_outside_regime = 0
+        #: The error bound the last update trusted the measured force to [N].
+        self.tick_error_n = self.error_n
         self.reset()
 
     @classmethod
@@ -119,11 +148,22 @@ class ForceBound:
         self.travel_bound_n = math.nan
 
     def update(
-        self, jaw_rad: float, grasp_point_m: np.ndarray, measured_force_n: np.ndarray, learned_stiffness_n_per_m: float
+        self,
+        jaw_rad: float,
+        grasp_point_m: np.ndarray,
+        measured_force_n: np.ndarray,
+        learned_stiffness_n_per_m: float,
+        commanded_qdd: np.ndarray | None = None,
     ) -> ForceEstimate:
-        """The tick's estimate from the jaw, the grasp point (base frame) [m] and the measured force [N]."""
+        """The tick's estimate from the jaw, the grasp point (base frame) [m], the measured force [N] and the joint
+        accelerations the force was computed with (the last command's; None: within the regime)."""
         if self.exact:
             return ForceEstimate(measured_force_n, 0.0, learned_stiffness_n_per_m, MEASURED)
+        error_n = self.error_n
+        if self.regime is not None and commanded_qdd is not None and not self.regime.covers(commanded_qdd):
+            error_n = max(error_n, self.regime.error_outside_n)
+            self.ticks_outside_regime += 1
+        self.tick_error_n = error_n
         if jaw_rad < CLOSED_JAW_RAD:
             if self._grasped_at is None or self._open_s >= RESETTLE_S:
                 self._grasped_at = np.array(grasp_point_m, dtype=float)
@@ -131,13 +171,13 @@ class ForceBound:
         else:
             self._open_s += self.period_s
         stiffness = self.stiffness_bound_n_per_m
-        measured = ForceEstimate(measured_force_n, self.error_n, stiffness, MEASURED)
+        measured = ForceEstimate(measured_force_n, error_n, stiffness, MEASURED)
         if self._grasped_at is None or self._open_s >= RELEASE_S:
             self.travel_bound_n = math.nan
             return measured
         travel = stiffness * (np.asarray(grasp_point_m, dtype=float) - self._grasped_at)
         self.travel_bound_n = self.held_load_bound_n + math.sqrt(float(travel @ travel))
-        measured_room = self.limit_n - self.error_n - math.sqrt(float(measured_force_n @ measured_force_n))
+        measured_room = self.limit_n - error_n - math.sqrt(float(measured_force_n @ measured_force_n))
         travel_room = self.limit_n - self.travel_bound_n
         if measured_room >= travel_room:  # NaN in the measurement fails this: the travel bound needs none
             return measured
@@ -150,7 +190,9 @@ class ForceBound:
 
     def at_limit(self, limit_n: float) -> ForceBound:
         """The same bounds under another force limit [N] (a fresh episode)."""
-        return ForceBound(limit_n, self.error_n, self.stiffness_bound_n_per_m, self.held_load_bound_n, self.period_s)
+        return ForceBound(
+            limit_n, self.error_n, self.stiffness_bound_n_per_m, self.held_load_bound_n, self.period_s, self.regime
+        )
 
     def travel_allowed_m(self) -> float:
         """How far the grasp point may travel from the grasp under the travel bound alone [m]."""

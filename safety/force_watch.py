@@ -91,7 +91,7 @@ class ForceLimitWatch:
         self.limit_n = float(limit_n)
         self.period_s = float(period_s)
         self.error_n = float(error_n)
-        self._threshold = self.limit_n + self.error_n
+        self._error = self.error_n  # the widest bound of the excursion in progress
         self.excursions: list[ForceExcursion] = []
         self._start = 0.0
         self._ticks = 0
@@ -108,17 +108,23 @@ class ForceLimitWatch:
         """The last tick's force was above the limit."""
         return self._ticks > 0
 
-    def update(self, force_n: np.ndarray | float, stamp_s: float) -> ForceExcursion | None:
+    def update(
+        self, force_n: np.ndarray | float, stamp_s: float, error_n: float | None = None
+    ) -> ForceExcursion | None:
         """Take one tick's measured force (a 3-vector or a magnitude) [N]; return an excursion that just ended.
 
-        A non-finite force counts as above the limit: it is no evidence that the force is below it.
+        ``error_n``: this tick's error bound where it is wider than the watch's (a calibration beyond the
+        accelerations it was fitted on, :class:`safety.force_bound.SensingRegime`). A non-finite force counts as
+        above the limit: it is no evidence that the force is below it.
         """
         vector = np.asarray(force_n, dtype=float).reshape(-1)
         magnitude = float(math.sqrt(float(vector @ vector))) if vector.size > 1 else abs(float(vector[0]))
-        if magnitude <= self._threshold:  # NaN fails this comparison
+        tick_error_n = self.error_n if error_n is None else max(self.error_n, float(error_n))
+        if magnitude <= self.limit_n + tick_error_n:  # NaN fails this comparison
             return self.finish()
         if self._ticks == 0:
-            self._start, self._peak = float(stamp_s), 0.0
+            self._start, self._peak, self._error = float(stamp_s), 0.0, self.error_n
+        self._error = max(self._error, tick_error_n)
         self._ticks += 1
         self._peak = max(self._peak, magnitude) if math.isfinite(magnitude) else math.inf
         return None
@@ -137,7 +143,7 @@ class ForceLimitWatch:
         return self.excursions + ([self._current(open_=True)] if self._ticks else [])
 
     def _current(self, *, open_: bool) -> ForceExcursion:
-        return ForceExcursion(self._start, self._ticks * self.period_s, self._peak, self.limit_n, open_, self.error_n)
+        return ForceExcursion(self._start, self._ticks * self.period_s, self._peak, self.limit_n, open_, self._error)
 
 
 #: A retraction the limit slows below this is stalled [m/s]: measured on the tasks (expert, 1 s windows

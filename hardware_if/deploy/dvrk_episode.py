@@ -97,7 +97,9 @@ def dvrk_episode(
                     force = float(np.linalg.norm(measured.force_n))
                     if math.isfinite(force):  # a non-finite force is a sensing fault: the deadman holds on it
                         peak = max(peak, force)
-                        ended = watch.update(measured.force_n, time.monotonic() - started)
+                        ended = watch.update(
+                            measured.force_n, time.monotonic() - started, chain.force_bound.tick_error_n
+                        )
                         if ended is not None:
                             account_excursions(report, recorder, [ended.to_event()], episode)
                         report.peak_force_n = max(report.peak_force_n, force)
@@ -148,6 +150,10 @@ def dvrk_episode(
         last = watch.finish()
         if last is not None:
             account_excursions(report, recorder, [last.to_event()], episode)
+        bound = chain.force_bound
+        if bound.regime is not None:  # the chain's count runs over the episodes: the report's is the total
+            report.force_sensing_ticks_beyond = bound.ticks_outside_regime
+            report.force_sensing_error_beyond_n = bound.regime.error_outside_n
     entry: dict[str, Any] = {
         "episode": episode,
         "seed": seed,

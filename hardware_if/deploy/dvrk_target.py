@@ -143,6 +143,8 @@ def deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder
                 except DvrkError as e:
                     raise HoldError("not ready", str(e)) from None
             chain = ControlChain(config)
+            if options.wrench_calibration is not None:  # its bound holds within the accelerations it was fitted on
+                chain.force_bound.regime = options.wrench_calibration.sensing_regime()
             for episode in range(options.episodes):
                 seed = options.seed + episode
                 _require_exclusive(client, f"episode {episode}: before its first command")

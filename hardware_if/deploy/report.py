@@ -72,6 +72,8 @@ class DeployReport:
     force_limit_exceeded: int = 0
     force_over_limit_s: float = 0.0
     force_limit_stalls: int = 0
+    force_sensing_error_beyond_n: float = 0.0
+    force_sensing_ticks_beyond: int = 0
 
     @property
     def exit_code(self) -> int:
@@ -128,6 +130,12 @@ class DeployReport:
             out.append(f"  force limit {self.force_limit_n:g} N: never exceeded{told}")
         else:
             out.append(f"  force limit {self.force_limit_n:g} N: no episode ran")
+        if self.force_sensing_ticks_beyond:
+            out.append(
+                f"  force sensing: on {self.force_sensing_ticks_beyond} of {self.commands} ticks the commanded "
+                "accelerations were beyond those the calibration was fitted on; the force was trusted there only to "
+                f"its error_bound_n {self.force_sensing_error_beyond_n:.2f} N"
+            )
         if self.force_limit_stalls:
             out.append(
                 f"  the force limit stalled the retraction in {self.force_limit_stalls} episode(s) "

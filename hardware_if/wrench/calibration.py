@@ -23,9 +23,17 @@ from psm_control.inputs import check_regular_file
 from psm_control.outputs import write_atomic
 from psm_control.robot import PsmConfiguration
 from safety.config import SafetyConfig
+from safety.force_bound import SensingRegime
 from sim.force_sensing import console_force
 
-__all__ = ["EXACT_SENSING", "MAX_FILE_BYTES", "MIN_BOUND_N", "WrenchCalibration", "read_calibration"]
+__all__ = [
+    "EXACT_SENSING",
+    "MAX_FILE_BYTES",
+    "MIN_BOUND_N",
+    "WrenchCalibration",
+    "read_calibration",
+    "within_accelerations",
+]
 
 #: Largest calibration file read [bytes] (1 MiB): one holds a few hundred numbers, a few kilobytes.
 MAX_FILE_BYTES = 1024 * 1024
@@ -65,6 +73,11 @@ class WrenchCalibration:
         max_after_without_acceleration_n: The largest held-out error without the acceleration in the regime
             ``error_bound_n`` covers (retraction speeds, accelerations within the chain's limits) [N]; None in
             files of earlier versions or when the held-out log had no sample there.
+        covered_acceleration: Per joint, the largest acceleration magnitude of the logs it was fitted on (rad/s^2;
+            m/s^2 on the insertion), None on a joint the logs do not carry: the inertia it identified is known up
+            to these, so ``error_bound_with_acceleration_n`` bounds only motions whose accelerations are within
+            them (:meth:`covers`); beyond, ``error_bound_n`` (the inertia taken as unknown up to the chain's
+            limits). None in files of earlier versions: every acceleration covered.
     """
 
     arm: str
@@ -81,6 +94,24 @@ class WrenchCalibration:
     console: str = "unknown"
     max_after_retraction_speed_n: float | None = None
     max_after_without_acceleration_n: float | None = None
+    covered_acceleration: tuple[float | None, ...] | None = None
+
+    def covers(self, qdd: np.ndarray) -> np.ndarray:
+        """Whether each acceleration (6,) or each row of (N, 6) is within :attr:`covered_acceleration`."""
+        return within_accelerations(self.covered_acceleration, qdd)
+
+    def sensing_regime(self) -> SensingRegime:
+        """Where :attr:`error_bound_with_acceleration_n` holds, for the safety filter; :attr:`error_bound_n` beyond."""
+        covered = self.covered_acceleration or (None,) * 6
+        return SensingRegime(np.array([math.inf if v is None else v for v in covered]), self.error_bound_n)
+
+    def regime_words(self) -> str:
+        """The motions :attr:`error_bound_with_acceleration_n` bounds, for a user."""
+        if self.covered_acceleration is None:
+            return "any acceleration (a file of an earlier version records none)"
+        units = ["rad/s^2", "rad/s^2", "m/s^2", "rad/s^2", "rad/s^2", "rad/s^2"]
+        shown = [f"{v:.3g} {u}" for v, u in zip(self.covered_acceleration, units, strict=True) if v is not None]
+        return "joint accelerations within those it was fitted on (" + ", ".join(shown) + ")"
 
     @property
     def origin(self) -> str:
@@ -112,6 +143,15 @@ class WrenchCalibration:
     def write(self, path: Path, field: str = "--out") -> None:
         """Write the calibration as JSON, whole or not at all (:func:`psm_control.outputs.write_atomic`)."""
         write_atomic(path, json.dumps({"kind": "wrench_calibration", **asdict(self)}, indent=2) + "\n", field)
+
+
+def within_accelerations(covered: tuple[float | None, ...] | None, qdd: np.ndarray) -> np.ndarray:
+    """Whether each acceleration (6,) or each row of (N, 6) is within ``covered`` per joint (None: no limit)."""
+    magnitude = np.abs(np.asarray(qdd, dtype=float))
+    if covered is None:
+        return np.ones(magnitude.shape[:-1], dtype=bool)
+    limits = np.array([math.inf if v is None else v for v in covered])
+    return np.asarray(np.all(magnitude <= limits, axis=-1))
 
 
 _FIGURES = (
@@ -177,6 +217,7 @@ def read_calibration(path: str | Path, arm: str | None = None, *, exact_console:
             console=str(data["console"]),
             max_after_retraction_speed_n=_optional_float(data, "max_after_retraction_speed_n"),
             max_after_without_acceleration_n=_optional_float(data, "max_after_without_acceleration_n"),
+            covered_acceleration=_optional_accelerations(data),
         )
     except (AttributeError, KeyError, TypeError, ValueError) as e:
         raise InputFileError(field, path, f"a file this version of calibrate-wrench wrote ({e})") from e
@@ -187,6 +228,16 @@ def read_calibration(path: str | Path, arm: str | None = None, *, exact_console:
 def _optional_float(data: dict[str, Any], key: str) -> float | None:
     """``data[key]`` as a float, None when it is missing or null (a regime the held-out log did not reach)."""
     return None if data.get(key) is None else float(data[key])
+
+
+def _optional_accelerations(data: dict[str, Any]) -> tuple[float | None, ...] | None:
+    """``data["covered_acceleration"]``: six numbers or nulls, or None when the file has none."""
+    values = data.get("covered_acceleration")
+    if values is None:
+        return None
+    if not isinstance(values, list) or len(values) != 6:
+        raise ValueError("covered_acceleration: six numbers (or null for a joint the logs did not carry)")
+    return tuple(None if v is None else float(v) for v in values)
 
 
 def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_console: bool) -> None:
@@ -201,6 +252,9 @@ def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_con
         value = getattr(calibration, name)
         if value is not None and not (math.isfinite(value) and value >= 0.0):
             raise InputFileError(field, path, f"a finite, non-negative {name} (this file has {value!r})")
+    covered = [v for v in calibration.covered_acceleration or () if v is not None]
+    if not all(math.isfinite(v) and v > 0.0 for v in covered):
+        raise InputFileError(field, path, f"covered_acceleration: finite and > 0 (this file has {covered!r})")
     if arm is not None and calibration.arm != arm:
         raise InputFileError(field, path, f"a calibration of {arm} (this one is {calibration.arm}'s)")
     bound = calibration.error_bound_n

@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from hardware_if.wrench.calibration import MIN_BOUND_N, WrenchCalibration
+from hardware_if.wrench.calibration import MIN_BOUND_N, WrenchCalibration, within_accelerations
 from hardware_if.wrench.joint_logs import MIN_SAMPLES, JointLog, TooFewSamplesError, check_free_space_log
 from psm_control.effort_model import independent_columns, shared_regressor
 from psm_control.errors import ConfigurationError
@@ -74,6 +74,7 @@ __all__ = [
     "bound_verdict",
     "check_calibration",
     "coverage_line",
+    "covered_acceleration",
     "fit_calibration",
     "inertia_allowance_n",
     "prepare_log",
@@ -208,6 +209,8 @@ class FreeSpaceError:
         tip_speed_m_s: Tool-tip speed per sample [m/s].
         within_acceleration_limits: Whether each sample's joint accelerations are within the control chain's
             acceleration limits (``SafetyConfig().acceleration``), as a deploy's are (N,).
+        within_covered_acceleration: Whether each sample's joint accelerations are within those the calibration
+            was fitted on (:attr:`WrenchCalibration.covered_acceleration`) (N,).
     """
 
     before_n: np.ndarray
@@ -216,30 +219,43 @@ class FreeSpaceError:
     insertion_m: np.ndarray
     tip_speed_m_s: np.ndarray
     within_acceleration_limits: np.ndarray
+    within_covered_acceleration: np.ndarray
 
     @staticmethod
     def _rms(values: np.ndarray) -> float:
         return float(np.sqrt(np.mean(np.square(values)))) if len(values) else math.nan
 
     def retraction_max_n(self) -> float:
-        """The largest calibrated error (accelerations from the log) at retraction speeds [N]."""
-        slow = self.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S
-        if not np.any(slow):
-            slow = np.ones_like(slow)  # a log with no slow samples: its whole error
-        return float(self.after_n[slow].max())
+        """The largest calibrated error (accelerations from the log) at retraction speeds, within the covered
+        accelerations [N]; a log with no such sample: within the covered accelerations at any speed, else all."""
+        for inside in (self.in_retraction_regime, self.within_covered_acceleration):
+            if np.any(inside):
+                return float(self.after_n[inside].max())
+        return float(self.after_n.max())
+
+    @property
+    def in_retraction_regime(self) -> np.ndarray:
+        """The samples ``error_bound_with_acceleration_n`` bounds: at retraction speeds, their accelerations within
+        those the calibration was fitted on (N,)."""
+        return (self.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S) & self.within_covered_acceleration
 
     def regimes(self) -> dict[str, tuple[np.ndarray, np.ndarray, str]]:
         """What each of a calibration's bounds covers, by the bound's name: (the samples inside its regime (N,)
         bool, the calibrated error it bounds there (N,) [N], the regime in words).
 
         ``error_bound_with_acceleration_n`` bounds the error with the acceleration known at tip speeds up to
-        :data:`RETRACTION_TIP_SPEED_M_S`; ``error_bound_n`` the error without it (a deploy's) there, while the
-        joints accelerate within the chain's limits (its inertia allowance is taken at those limits).
+        :data:`RETRACTION_TIP_SPEED_M_S` and joint accelerations within those the calibration was fitted on (its
+        inertia is known up to them); ``error_bound_n`` the error without the acceleration (a deploy's) there,
+        while the joints accelerate within the chain's limits (its inertia allowance is taken at those limits).
         """
         slow = self.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S
         speed = f"tip speed <= {RETRACTION_TIP_SPEED_M_S:g} m/s"
         return {
-            "error_bound_with_acceleration_n": (slow, self.after_n, f"{speed}, the acceleration known"),
+            "error_bound_with_acceleration_n": (
+                self.in_retraction_regime,
+                self.after_n,
+                f"{speed} and joint accelerations within those fitted on, the acceleration known",
+            ),
             "error_bound_n": (
                 slow & self.within_acceleration_limits,
                 self.after_live_n,
@@ -276,6 +292,7 @@ class FreeSpaceError:
             "rms_after_without_acceleration_n": self._rms(self.after_live_n),
             "max_after_retraction_speed_n": self.retraction_max_n(),
             "retraction_tip_speed_m_s": RETRACTION_TIP_SPEED_M_S,
+            "samples_beyond_covered_acceleration": int(np.count_nonzero(~self.within_covered_acceleration)),
             "by_depth": self._bins(self.insertion_m, DEPTH_BINS_M, "insertion_m"),
             "by_speed": self._bins(self.tip_speed_m_s, SPEED_BINS_M_S, "tip_speed_m_s"),
         }
@@ -296,19 +313,33 @@ def coverage_line(logs: Sequence[PreparedLog]) -> str:
     return line + "".join(f"; {note}" for note in notes)
 
 
-def _free_space_errors(parameters: np.ndarray, logs: Sequence[PreparedLog]) -> list[FreeSpaceError]:
+def covered_acceleration(logs: Sequence[PreparedLog]) -> tuple[float | None, ...]:
+    """Per joint, the largest acceleration magnitude of the logs (None on a joint none of them carries)."""
+    out: list[float | None] = []
+    for j in range(6):
+        carried = [float(np.abs(p.qdd[:, j]).max()) for p in logs if p.joint_mask[j] and len(p.qdd)]
+        out.append(max(carried) if carried else None)
+    return tuple(out)
+
+
+def _free_space_errors(
+    parameters: np.ndarray, logs: Sequence[PreparedLog], covered: tuple[float | None, ...] | None = None
+) -> list[FreeSpaceError]:
     """The free-space error of each parameter vector (the columns of ``parameters``, (columns, k)) on ``logs``,
-    in one pass over the logs' regressors, a chunk at a time."""
+    in one pass over the logs' regressors, a chunk at a time; ``covered``: the accelerations per joint the
+    calibration was fitted on, which bound the retraction regime (None: every acceleration)."""
     k = parameters.shape[1]
     before: list[np.ndarray] = []
     after: list[np.ndarray] = []
     live: list[np.ndarray] = []
     within: list[np.ndarray] = []
+    known: list[np.ndarray] = []
     limits = SafetyConfig().acceleration
     for p in logs:
         effort = p.log.effort * p.joint_mask
         before.append(np.linalg.norm(np.einsum("kij,kj->ki", p.projector, effort), axis=1))
         within.append(np.all(np.abs(p.qdd) <= limits, axis=1))
+        known.append(within_accelerations(covered, p.qdd * p.joint_mask))
         for acceleration, out in ((True, after), (False, live)):
             errors = np.zeros((len(effort), k))
             for part in p.chunks():
@@ -317,18 +348,22 @@ def _free_space_errors(parameters: np.ndarray, logs: Sequence[PreparedLog]) -> l
             out.append(errors)
     shared = [np.concatenate(x) for x in (before, [p.insertion_m for p in logs], [p.tip_speed_m_s for p in logs])]
     after_all, live_all, within_all = np.concatenate(after), np.concatenate(live), np.concatenate(within)
+    known_all = np.concatenate(known)
     return [
-        FreeSpaceError(shared[0], after_all[:, m], live_all[:, m], shared[1], shared[2], within_all) for m in range(k)
+        FreeSpaceError(shared[0], after_all[:, m], live_all[:, m], shared[1], shared[2], within_all, known_all)
+        for m in range(k)
     ]
 
 
-def _free_space_error(parameters: np.ndarray, logs: Sequence[PreparedLog]) -> FreeSpaceError:
-    return _free_space_errors(np.asarray(parameters, dtype=float)[:, None], logs)[0]
+def _free_space_error(
+    parameters: np.ndarray, logs: Sequence[PreparedLog], covered: tuple[float | None, ...] | None = None
+) -> FreeSpaceError:
+    return _free_space_errors(np.asarray(parameters, dtype=float)[:, None], logs, covered)[0]
 
 
 def check_calibration(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) -> FreeSpaceError:
     """The free-space error of the console's estimate and of ``calibration`` on ``logs``."""
-    return _free_space_error(calibration.parameter_vector(), logs)
+    return _free_space_error(calibration.parameter_vector(), logs, calibration.covered_acceleration)
 
 
 def bound_verdict(calibration: WrenchCalibration, error: FreeSpaceError) -> dict[str, Any]:
@@ -539,15 +574,19 @@ def fit_calibration(
     factors, rows_total = _fold_factors(fit, weights)
     dynamic = shared_regressor().friction_start // 4  # the first columns: the rigid body's inertia and Coriolis
     fits = [_solve(factors, rows_total, samples, exclude=0), _solve(factors, rows_total, samples, exclude=dynamic)]
-    candidates = _free_space_errors(np.column_stack([parameters for _, parameters in fits]), held_out)
+    # Only what the fit saw is bounded: its inertia is known up to the accelerations of its own logs.
+    coverage = covered_acceleration(fit)
+    candidates = _free_space_errors(np.column_stack([parameters for _, parameters in fits]), held_out, coverage)
     errors = [FreeSpaceError._rms(candidate.after_n) for candidate in candidates]
     with_dynamics = not errors[0] > (1.0 - DYNAMICS_GAIN) * errors[1]
     columns, parameters = fits[0] if with_dynamics else fits[1]
     error = candidates[0] if with_dynamics else candidates[1]
     values = parameters[columns]
     slow = error.retraction_max_n()
-    shown_slow = int(np.count_nonzero(error.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S))
-    basis = slow if shown_slow >= MIN_REGIME_SAMPLES else max(slow, float(error.after_n.max()))
+    shown_slow = int(np.count_nonzero(error.in_retraction_regime))
+    covered = error.within_covered_acceleration
+    anywhere = float(error.after_n[covered].max()) if np.any(covered) else float(error.after_n.max())
+    basis = slow if shown_slow >= MIN_REGIME_SAMPLES else max(slow, anywhere)
     with_acceleration = max(BOUND_MARGIN * basis, MIN_BOUND_N)
     inside, live, _ = error.regimes()["error_bound_n"]
     shown = [float(error.after_n.max()), with_acceleration] + ([float(live[inside].max())] if np.any(inside) else [])
@@ -565,5 +604,6 @@ def fit_calibration(
         samples=samples,
         max_after_retraction_speed_n=slow,
         max_after_without_acceleration_n=float(live[inside].max()) if np.any(inside) else None,
+        covered_acceleration=coverage,
     )
     return calibration, error

@@ -178,7 +178,8 @@ def _trajectory(
 
 def _deployed_error(calibration: Any, deployed: Sequence[tuple[np.ndarray, ...]]) -> tuple[float, int]:
     """The largest calibrated free-space error as a deploy computes it [N], over the samples at retraction speeds
-    (over all when fewer than ``MIN_REGIME_SAMPLES`` are that slow), and how many samples it was taken over.
+    whose commanded accelerations are within those the calibration was fitted on (the regime its bound covers; at
+    any speed when fewer than ``MIN_REGIME_SAMPLES`` are that slow), and how many samples it was taken over.
 
     A deploy gives the calibration the console's velocity and the chain's commanded acceleration
     (:class:`hardware_if.client.arm_listener.ArmListener`), not the filtered ones the fit and its held-out figures
@@ -190,7 +191,7 @@ def _deployed_error(calibration: Any, deployed: Sequence[tuple[np.ndarray, ...]]
     configuration = PsmModel().configuration()
     errors, speeds = [], []
     for q, qd, effort, qdd in deployed:
-        if q[2] < MIN_INSERTION_M:
+        if q[2] < MIN_INSERTION_M or not calibration.covers(qdd):
             continue
         configuration.update(q)
         errors.append(float(np.linalg.norm(calibration.force(configuration, qd, effort, qdd))))

@@ -273,7 +273,8 @@ def run(args: argparse.Namespace) -> int:
     if args.target == "dvrk":
         bound = (
             "its error_bound_with_acceleration_n: the calibration is given the chain's commanded acceleration, "
-            "and the bound holds while the arm tracks it"
+            f"and the bound holds while the arm tracks it, with {calibration.regime_words()}; beyond them, to "
+            f"its error_bound_n {calibration.error_bound_n:.3g} N"
             if calibration is not None
             else "the dvrk sensing model's error bound: a real PSM's identified free-space efforts at the chain's "
             "acceleration limits, mostly the arm's inertia; the force limit is kept from the travel: on a robot, "
