@@ -20,6 +20,33 @@ def _robustness(out: Path) -> subprocess.CompletedProcess[str]:
     return run_cli(*SWEEP, "--vary", "stiffness=0.5:2x,obs_white_m=0:0.001", "--out", str(out))
 
 
+#: A sweep's output folder and the command's result.
+Sweep = tuple[Path, subprocess.CompletedProcess[str]]
+
+#: The shipped policy's sweep that several tests below read, each for its own property: a calibrated dVRK's
+#: policy (its own file), whole-step latency, lengths of fractions of a millimetre, five trials for five fifths
+#: of stiffness. Every process of a pretrained sweep loads the policy, so it runs once, on one worker.
+BESIDE_EXPERT = (
+    "robustness", "--task", "lift", "--trials", "5", "--jobs", "1", "--no-progress", "--force-sensing",
+    "dvrk-calibrated", "--vary", "stiffness=0.3:3x,obs_white_m=0:0.001,latency=0:2,obs_noise=0:0.002",
+    "--beside-expert",
+)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def beside_expert(tmp_path_factory: pytest.TempPathFactory) -> Sweep:
+    """``--policy pretrained --beside-expert``: the policy's sweep and the scripted expert's on its trials."""
+    out = tmp_path_factory.mktemp("beside")
+    return out, run_cli(*BESIDE_EXPERT, "--policy", "pretrained", "--out", str(out))
+
+
+@pytest.fixture(scope="module")
+def scripted_same_trials(tmp_path_factory: pytest.TempPathFactory) -> Sweep:
+    """The same sweep with ``--policy scripted``, where ``--beside-expert`` does nothing."""
+    out = tmp_path_factory.mktemp("scripted")
+    return out, run_cli(*BESIDE_EXPERT, "--policy", "scripted", "--out", str(out))
+
+
 def test_sweep_writes_episodes_report_and_plots_then_resumes(tmp_path: Path) -> None:
     """A sweep writes one JSON line per episode, a summary, a report and non-blank plots; a rerun skips all."""
     import matplotlib.image
@@ -88,40 +115,34 @@ def _strict(text: str) -> object:
     return json.loads(text, parse_constant=refuse)
 
 
-def test_latency_is_swept_and_binned_in_whole_steps_and_outputs_are_strict_json(tmp_path: Path) -> None:
+def test_latency_is_swept_and_binned_in_whole_steps_and_outputs_are_strict_json(beside_expert: Sweep) -> None:
     """latency takes whole policy steps in episodes and report bins; summary/sweep JSON parse strictly; the
     shipped policy's sha256 is recorded for pretrained."""
     import hashlib
 
     from policies.shipped import shipped_policy_path
 
-    result = run_cli(
-        "robustness", "--policy", "pretrained", "--task", "lift", "--trials", "6", "--jobs", "2", "--no-progress",
-        "--vary", "latency=0:2", "--out", str(tmp_path),
-    )  # fmt: skip
+    out, result = beside_expert
     assert result.returncode == 0, result.stderr
-    records = [_strict(line) for line in (tmp_path / "episodes.jsonl").read_text().splitlines()]
+    records = [_strict(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
     assert all(float(r["params"]["latency"]).is_integer() for r in records)  # type: ignore[index]
-    summary = _strict((tmp_path / "summary.json").read_text())
+    summary = _strict((out / "summary.json").read_text())
     assert isinstance(summary, dict) and "stall_static_load_n" in summary
-    sweep = _strict((tmp_path / "sweep.json").read_text())
-    digest = hashlib.sha256(shipped_policy_path("TissueRetract-Lift-v0").read_bytes()).hexdigest()
+    sweep = _strict((out / "sweep.json").read_text())
+    digest = hashlib.sha256(shipped_policy_path("TissueRetract-Lift-v0", "dvrk-calibrated").read_bytes()).hexdigest()
     assert isinstance(sweep, dict) and sweep["policy_sha256"] == digest
-    report = (tmp_path / "report.md").read_text()
+    report = (out / "report.md").read_text()
     labels = {line.split("|")[1].strip() for line in report.splitlines() if "policy steps |" in line}
     assert labels and labels <= {"0 policy steps", "1 policy steps", "2 policy steps"}, report
     assert "success" in result.stdout and "95 % CI" in result.stdout
 
 
-def test_the_report_reads_as_a_reviewer_needs(tmp_path: Path) -> None:
+def test_the_report_reads_as_a_reviewer_needs(beside_expert: Sweep) -> None:
     """The report names the shipped file it ran (path and digest), defines its terms, gives small lengths in
     millimetres and flags bins too thin to read alone."""
-    result = run_cli(
-        "robustness", "--policy", "pretrained", "--task", "lift", "--trials", "4", "--jobs", "2", "--no-progress",
-        "--vary", "obs_noise=0:0.002", "--force-sensing", "dvrk-calibrated", "--out", str(tmp_path),
-    )  # fmt: skip
+    out, result = beside_expert
     assert result.returncode == 0, result.stderr
-    report = (tmp_path / "report.md").read_text()
+    report = (out / "report.md").read_text()
     assert "pretrained: policies/pretrained/dvrk-calibrated/TissueRetract-Lift-v0.safetensors (sha256 " in report
     assert "| tissue_damage | an episode in which the force on the tissue exceeded 5 N" in report
     assert " mm | 1 (thin) |" in report or " mm | 2 (thin) |" in report, report
@@ -138,22 +159,21 @@ def _episodes(path: Path) -> list[dict[str, object]]:
     )
 
 
-def test_beside_expert_shows_the_expert_on_the_same_trials_by_fifth_of_stiffness(tmp_path: Path) -> None:
+def test_beside_expert_shows_the_expert_on_the_same_trials_by_fifth_of_stiffness(
+    beside_expert: Sweep, scripted_same_trials: Sweep
+) -> None:
     """--beside-expert: the fifths partition the trials, and the expert's episodes, overall success and Wilson
     interval are those of a --policy scripted sweep on the same seeds (where --beside-expert does nothing)."""
-    vary = ("--vary", "stiffness=0.3:3x,obs_white_m=0:0.001", "--jobs", "1")
-    sweep = ("robustness", "--task", "lift", "--trials", "5", "--no-progress", *vary, "--beside-expert")
-    beside = run_cli(*sweep, "--policy", "pretrained", "--out", str(tmp_path / "beside"))
-    assert beside.returncode == 0, beside.stderr
-    assert "scripted expert, same trials" in beside.stdout
-    alone = run_cli(*sweep, "--policy", "scripted", "--out", str(tmp_path / "scripted"))
+    (beside_out, result), (scripted_out, alone) = beside_expert, scripted_same_trials
+    assert result.returncode == 0, result.stderr
+    assert "scripted expert, same trials" in result.stdout
     assert alone.returncode == 0, alone.stderr
     assert "--beside-expert: the policy is the scripted expert already; no second pass" in alone.stdout
-    assert not (tmp_path / "scripted" / "expert_episodes.jsonl").exists()
-    expert = _episodes(tmp_path / "beside" / "expert_episodes.jsonl")
-    assert expert == _episodes(tmp_path / "scripted" / "episodes.jsonl")
-    summary = json.loads((tmp_path / "beside" / "summary.json").read_text())
-    scripted = json.loads((tmp_path / "scripted" / "summary.json").read_text())
+    assert not (scripted_out / "expert_episodes.jsonl").exists()
+    expert = _episodes(beside_out / "expert_episodes.jsonl")
+    assert expert == _episodes(scripted_out / "episodes.jsonl")
+    summary = json.loads((beside_out / "summary.json").read_text())
+    scripted = json.loads((scripted_out / "summary.json").read_text())
     assert summary["beside_expert"] is True and scripted["beside_expert"] is False
     assert (summary["expert_success"], summary["expert_ci95"]) == (scripted["success_rate"], scripted["ci95"])
     fifths = summary["by_stiffness_fifth"]
@@ -163,10 +183,10 @@ def test_beside_expert_shows_the_expert_on_the_same_trials_by_fifth_of_stiffness
     assert all(a["stiffness_high_kpa"] <= b["stiffness_low_kpa"] for a, b in itertools.pairwise(fifths))
     assert {f["stiffness_low_kpa"] for f in fifths} == {
         r["options"]["tissue_youngs_modulus_kpa"]  # type: ignore[index]
-        for r in _episodes(tmp_path / "beside" / "episodes.jsonl")
+        for r in _episodes(beside_out / "episodes.jsonl")
     }
-    report = (tmp_path / "beside" / "report.md").read_text()
+    report = (beside_out / "report.md").read_text()
     assert "## Where the force limit stops a retraction, by fifth of the drawn stiffness" in report
     header = "| Young's modulus | trials | success | stopped by the force limit | expert success |"
     assert header in report and " kPa | 1 (thin) | " in report, report
-    assert "expert success" not in (tmp_path / "scripted" / "report.md").read_text()
+    assert "expert success" not in (scripted_out / "report.md").read_text()
