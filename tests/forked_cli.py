@@ -24,7 +24,7 @@ import traceback
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["run_forked"]
+__all__ = ["run_forked", "run_one"]
 
 #: Modules the commands import once their arguments are checked: imported here once, not in every child.
 PRELOAD = (
@@ -92,6 +92,12 @@ def run_forked(
                     list(argvs[index]), status, out.read_text(errors="replace"), stderr
                 )
     return [r for r in results if r is not None]
+
+
+def run_one(*args: str, timeout_s: float = 300.0) -> subprocess.CompletedProcess[str]:
+    """``tissue-retract ARGS`` in a child forked from this process (:func:`run_forked` of one command)."""
+    (done,) = run_forked([args], timeout_s=timeout_s)
+    return done
 
 
 def _child(argv: list[str], stdout: Path, stderr: Path) -> None:
