@@ -18,6 +18,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -290,6 +291,7 @@ def force_limit_summary(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]
         "force_over_limit_s": float(sum(float(x["duration_s"]) for e in excursions for x in e)),
         "worst_peak_to_limit": max(ratios, default=math.nan),
         "force_limit_stalls": len(stalls),
+        "stall_force_sources": dict(sorted(Counter(str(e.get("force_source", "measured")) for e in stalls).items())),
         "stall_static_load_n": float(np.median(loads)) if loads else math.nan,
         "stall_static_load_to_limit": max(load_ratios, default=math.nan),
         # None: the travel bound was never in force (an exact sensor, or nothing grasped).
@@ -313,9 +315,18 @@ def describe_stalls(summary: dict[str, Any]) -> str:
     count = summary["force_limit_stalls"]
     if not count:
         return "never"
+    sources = summary.get("stall_force_sources") or {}
+    if sources and set(sources) == {"travel"}:
+        what = "the travel bound on the held tissue's force (no force was measured: the sensing cannot tell the limit)"
+    elif sources and "travel" in sources:
+        what = (
+            f"the held tissue's force, measured in {sources.get('measured', 0)} and bounded by its travel in "
+            f"{sources['travel']} (the sensing cannot tell the limit there)"
+        )
+    else:
+        what = "the measured force on the held tissue"
     return (
-        f"in {count} episode(s): the force on the held tissue (measured, or its travel bound with an inexact "
-        f"sensor) was {summary['stall_static_load_n']:.3f} N (median), "
+        f"in {count} episode(s): {what} was {summary['stall_static_load_n']:.3f} N (median), "
         f"up to {summary['stall_static_load_to_limit']:.2f} x the limit"
     )
 

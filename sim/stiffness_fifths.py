@@ -12,6 +12,7 @@ controller from one the policy could have avoided.
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -21,7 +22,15 @@ import numpy as np
 from sim.success_interval import wilson_interval
 from sim.sweep.stats import THIN_BIN_EPISODES
 
-__all__ = ["STALL", "STIFFNESS_KEY", "StiffnessFifth", "by_stiffness_fifth", "expert_summary", "stiffness_kpa"]
+__all__ = [
+    "STALL",
+    "STIFFNESS_KEY",
+    "StiffnessFifth",
+    "by_stiffness_fifth",
+    "expert_summary",
+    "stiffness_kpa",
+    "stop_reason",
+]
 
 #: The record's (and the randomization's) name of the flap's Young's modulus [kPa].
 STIFFNESS_KEY = "tissue_youngs_modulus_kpa"
@@ -45,6 +54,19 @@ def _stalled(record: Mapping[str, Any]) -> bool:
     return record.get("failure_class") == STALL
 
 
+def stop_reason(record: Mapping[str, Any]) -> str | None:
+    """What ended an unsuccessful episode (None for a success): its failure class, and for the force limit what its
+    bound was on (the last stall event's ``force_source``: ``travel`` or ``measured``)."""
+    if record.get("success"):
+        return None
+    failure = str(record.get("failure_class", "none"))
+    if failure != STALL:
+        return failure
+    events = record.get("force_limit_stall") or ()
+    source = str(events[-1].get("force_source", "measured")) if events else "measured"
+    return f"{STALL} ({'travel bound' if source == 'travel' else 'measured force'})"
+
+
 def _share(count: int | None, total: int) -> float | None:
     """``count`` of ``total`` as a fraction (None of no episodes)."""
     return None if count is None or total == 0 else count / total
@@ -64,6 +86,9 @@ class StiffnessFifth:
         expert_trials: The scripted expert's finished episodes of the same trials (None: no expert pass).
         expert_successes: The expert's successful episodes among them.
         expert_force_limit_stall_episodes: The expert's episodes the force limit stopped.
+        stopped_by: What ended the policy's unsuccessful episodes: their failure classes, the force limit's split
+            by what its bound was on (``force_limit_stall (travel bound)``: the grasp point's travel, where the
+            sensing cannot tell the limit; ``force_limit_stall (measured force)``), with counts.
     """
 
     stiffness_low_kpa: float
@@ -74,6 +99,7 @@ class StiffnessFifth:
     expert_trials: int | None = None
     expert_successes: int | None = None
     expert_force_limit_stall_episodes: int | None = None
+    stopped_by: dict[str, int] = dataclasses.field(default_factory=dict)
 
     @property
     def thin(self) -> bool:
@@ -91,6 +117,7 @@ class StiffnessFifth:
             "success": self.successes / self.trials,
             "force_limit_stall_episodes": self.force_limit_stall_episodes,
             "force_limit_stall": self.force_limit_stall_episodes / self.trials,
+            "stopped_by": dict(self.stopped_by),
         }
         if self.expert_trials is not None:
             out.update(
@@ -129,6 +156,9 @@ def by_stiffness_fifth(
             trials=len(members),
             successes=sum(bool(r.get("success")) for _, _, r in members),
             force_limit_stall_episodes=sum(_stalled(r) for _, _, r in members),
+            stopped_by=dict(
+                sorted(Counter(reason for _, _, r in members if (reason := stop_reason(r)) is not None).items())
+            ),
         )
         if expert is not None:
             beside = [expert[index] for _, index, _ in members if index in expert]

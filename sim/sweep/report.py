@@ -190,11 +190,15 @@ def _stiffness_section(page: Page, fifths: Sequence[StiffnessFifth], expert: boo
     beside = ", the scripted expert's episodes of the same trials (seeds and draws) beside the policy's"
     page.paragraph(
         "The trials ordered by the Young's modulus their flap was drawn with, in five groups whose sizes differ by "
-        f"at most one{beside if expert else ''}."
+        f"at most one{beside if expert else ''}. The last column names what ended the policy's unsuccessful "
+        "episodes (failure classes, see Terms); the force limit's by what its bound was on: the travel bound (the "
+        "grasp point's travel since the grasp times the stiffest tissue's stiffness, where the force sensing cannot "
+        "tell the limit: no force was measured that high) or the measured force."
     )
     header = ["Young's modulus", "trials", "success", "stopped by the force limit"]
     if expert:
         header += ["expert success", "expert stopped by the force limit"]
+    header.append("what ended the policy's unsuccessful episodes")
     rows = []
     for f in fifths:
         data = f.to_dict()
@@ -206,6 +210,7 @@ def _stiffness_section(page: Page, fifths: Sequence[StiffnessFifth], expert: boo
         ]
         if expert:
             row += [percent(data["expert_success"]), percent(data["expert_force_limit_stall"])]
+        row.append(_counts(f.stopped_by) if f.stopped_by else "none")
         rows.append(row)
     page.table(header, rows)
 
@@ -221,6 +226,7 @@ def write_report(
     limit_enforced: bool = True,
     command: str = "",
     expert_records: Sequence[dict[str, Any]] | None = None,
+    warnings: Sequence[str] = (),
 ) -> dict[str, Path]:
     """Write plots, ``report.md`` and a self-contained ``report.html`` into ``out_dir``.
 
@@ -235,6 +241,7 @@ def write_report(
         command: The command line that ran the sweep.
         expert_records: The scripted expert's records of the same trials, shown beside the policy's
             (``robustness --beside-expert``); None: no expert pass.
+        warnings: What the run warned of at its start (the force sensing's, the policy's), shown under the card.
 
     Returns:
         The written files by role (``report_html``, ``report_md``, the PNGs).
@@ -285,6 +292,9 @@ def write_report(
         ("package", f"tissue-retract {__version__}"),
     ]
     page.card(rows, alert=alert)
+    if warnings:
+        page.heading("Warnings at the start of the run")
+        page.items(list(warnings))
     if command:
         page.heading("Command")
         page.command(command)

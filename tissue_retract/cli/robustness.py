@@ -294,6 +294,7 @@ def run(args: argparse.Namespace) -> int:
         limit_enforced=not args.no_safety,
         command=args.command_line,
         expert_records=expert_records,
+        warnings=summary["warnings"],
     )
     table = Table(title=f"robustness: {args.policy} on {task_id}")
     table.add_column("metric")
