@@ -317,7 +317,7 @@ def describe_stalls(summary: dict[str, Any]) -> str:
         return "never"
     sources = summary.get("stall_force_sources") or {}
     if sources and set(sources) == {"travel"}:
-        what = "the travel bound on the held tissue's force (no force was measured: the sensing cannot tell the limit)"
+        what = "the travel bound on the held tissue's force, not a measured force (the sensing cannot tell the limit)"
     elif sources and "travel" in sources:
         what = (
             f"the held tissue's force, measured in {sources.get('measured', 0)} and bounded by its travel in "

@@ -193,7 +193,7 @@ def _stiffness_section(page: Page, fifths: Sequence[StiffnessFifth], expert: boo
         f"at most one{beside if expert else ''}. The last column names what ended the policy's unsuccessful "
         "episodes (failure classes, see Terms); the force limit's by what its bound was on: the travel bound (the "
         "grasp point's travel since the grasp times the stiffest tissue's stiffness, where the force sensing cannot "
-        "tell the limit: no force was measured that high) or the measured force."
+        "tell the limit: a bound, not a measured force) or the measured force."
     )
     header = ["Young's modulus", "trials", "success", "stopped by the force limit"]
     if expert:

@@ -65,7 +65,7 @@ def test_the_report_page_carries_the_warnings_and_the_reasons(tmp_path: Path) ->
 def test_the_held_tissue_force_is_named_for_what_it_is() -> None:
     summary = {"force_limit_stalls": 2, "stall_static_load_n": 3.0, "stall_static_load_to_limit": 1.0}
     travel = describe_stalls({**summary, "stall_force_sources": {"travel": 2}})
-    assert "the travel bound on the held tissue's force (no force was measured" in travel
+    assert "the travel bound on the held tissue's force, not a measured force" in travel
     measured = describe_stalls({**summary, "stall_force_sources": {"measured": 2}})
     assert "the measured force on the held tissue was 3.000 N" in measured
     both = describe_stalls({**summary, "stall_force_sources": {"measured": 1, "travel": 1}})
