@@ -1,4 +1,8 @@
-"""Smoke runs of the simulation's commands, as a user would type them."""
+"""Smoke runs of the simulation's commands, as a user would type them.
+
+Each runs the real command line in a child forked from this process (:mod:`tests.forked_cli`), but for what
+only a process of its own shows: the exit status of a stop signal, and what PyBullet prints when it is imported.
+"""
 
 from __future__ import annotations
 
@@ -11,8 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.forked_cli import run_one
+
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    """``python -m tissue_retract ARGS``, a fresh interpreter."""
     return subprocess.run(
         [sys.executable, "-m", "tissue_retract", *args], capture_output=True, text=True, timeout=900, check=False
     )
@@ -20,7 +27,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
 
 def test_plain_demo_runs_an_expert_episode() -> None:
     """`demo` with no arguments runs one scripted Task III episode and prints a summary."""
-    result = _cli("demo")
+    result = run_one("demo")
     assert result.returncode == 0, result.stderr
     assert "TissueRetract-MultiSite-v0: scripted expert succeeded in 1/1" in result.stdout
 
@@ -28,7 +35,7 @@ def test_plain_demo_runs_an_expert_episode() -> None:
 def test_demo_writes_demonstrations_and_video(tmp_path: Path) -> None:
     """`demo --out --video` writes a .npz of successful episodes with metadata, and a GIF."""
     out, video = tmp_path / "demos.npz", tmp_path / "episode.gif"
-    result = _cli("demo", "--task", "lift", "--episodes", "2", "--out", str(out), "--video", str(video))
+    result = run_one("demo", "--task", "lift", "--episodes", "2", "--out", str(out), "--video", str(video))
     assert result.returncode == 0, result.stderr
     data = np.load(out)
     assert data["action"].shape == (2, 50, 5)
@@ -43,7 +50,7 @@ def test_evaluate_writes_the_documented_json(tmp_path: Path) -> None:
     """`evaluate --json --safety-config` writes summary and per-episode keys, safety figures included."""
     path, config = tmp_path / "eval.json", tmp_path / "safety.toml"
     config.write_text("force_limit_n = 1.5\n")
-    result = _cli(
+    result = run_one(
         "evaluate", "--policy", "random", "--task", "2", "--episodes", "2", "--seeds", "1", "--json", str(path),
         "--safety-config", str(config),
     )  # fmt: skip
@@ -64,7 +71,7 @@ def test_evaluate_writes_the_documented_json(tmp_path: Path) -> None:
 def test_evaluate_episodes_is_the_total_and_progress_is_shown(tmp_path: Path) -> None:
     """`--episodes 4` with the default three seeds runs 4 episodes in all, says so as they end, with a Wilson CI."""
     path = tmp_path / "eval.json"
-    result = _cli("evaluate", "--policy", "scripted", "--task", "lift", "--episodes", "4", "--json", str(path))
+    result = run_one("evaluate", "--policy", "scripted", "--task", "lift", "--episodes", "4", "--json", str(path))
     assert result.returncode == 0, result.stderr
     report = json.loads(path.read_text())
     assert report["summary"]["episodes"] == 4
@@ -101,7 +108,7 @@ def test_a_stop_signal_keeps_the_finished_episodes_in_the_json(tmp_path: Path, s
 @pytest.mark.parametrize("command", ["evaluate", "robustness", "tune-safety", "deploy"])
 def test_every_policy_help_names_pretrained(command: str) -> None:
     """Every --policy help line lists pretrained, which the README uses."""
-    result = _cli(command, "--help")
+    result = run_one(command, "--help")
     assert result.returncode == 0
     assert "pretrained" in " ".join(result.stdout.split()), result.stdout
 
@@ -137,16 +144,16 @@ def test_no_pybullet_build_line_in_the_output(argv: tuple[str, ...], tmp_path: P
 
 def test_evaluate_rejects_unknown_policy_and_task() -> None:
     """Unknown tasks and unloadable policies fail with a message naming what is allowed."""
-    result = _cli("evaluate", "--policy", "random", "--task", "nope", "--episodes", "1")
+    result = run_one("evaluate", "--policy", "random", "--task", "nope", "--episodes", "1")
     assert result.returncode == 1 and "multisite" in result.stderr
-    result = _cli("evaluate", "--policy", "missing_module:fn", "--task", "lift", "--episodes", "1")
+    result = run_one("evaluate", "--policy", "missing_module:fn", "--task", "lift", "--episodes", "1")
     assert result.returncode == 1 and "module:callable" in result.stderr
 
 
 def test_bench_env_reports_rates(tmp_path: Path) -> None:
     """`bench env --json` reports state-only and rendering steps/s."""
     path = tmp_path / "bench.json"
-    result = _cli("bench", "env", "--steps", "60", "--render-steps", "5", "--json", str(path))
+    result = run_one("bench", "env", "--steps", "60", "--render-steps", "5", "--json", str(path))
     assert result.returncode == 0, result.stderr
     numbers = json.loads(path.read_text())
     assert numbers["env_steps_per_s"] > 0 and numbers["render_env_steps_per_s"] > 0
@@ -157,7 +164,7 @@ def test_bench_train_times_the_recipe_and_confirms_on_unseen_episodes(tmp_path: 
     """`bench train`: a recipe run per seed, timed from outside, its kept policy scored on unseen episodes."""
     path = tmp_path / "train.json"
     args = ("--tasks", "lift", "--seeds", "4", "--confirm-episodes", "1", "--budget-s", "10")
-    result = _cli("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path))
+    result = run_one("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path), timeout_s=900)
     assert result.returncode == 0, result.stderr
     (run,) = json.loads(path.read_text())["runs"]
     log = Path(run["log"]).read_text()
@@ -173,7 +180,7 @@ def test_bench_train_robust_confirms_beside_the_expert_on_the_sweep(tmp_path: Pa
     the second seed resumes from the first's instead of running them again."""
     path = tmp_path / "train.json"
     args = ("--robust", "--tasks", "lift", "--seeds", "4", "5", "--confirm-episodes", "1", "--budget-s", "10")
-    result = _cli("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path))
+    result = run_one("bench", "train", *args, "--out", str(tmp_path / "runs"), "--json", str(path), timeout_s=900)
     assert result.returncode == 0, result.stderr
     runs = json.loads(path.read_text())["runs"]
     for run in runs:
@@ -190,7 +197,10 @@ def test_bench_train_robust_confirms_beside_the_expert_on_the_sweep(tmp_path: Pa
 def test_tissue_test_prints_and_writes_both_tests(tmp_path: Path) -> None:
     """`tissue-test` measures tension within 10 % of E t W eps and writes both tests with their curves."""
     out = tmp_path / "material.json"
-    result = _cli("tissue-test", "--tissue", "liver", "--size-mm", "60", "--json", str(out))
+    # The coarsest lattice (4 nodes a side, a third of the default's CPU): its 1/(n - 1) share of E t / k is the
+    # largest; tests/sim/test_material.py measures the default lattice over E, t and W.
+    argv = ("tissue-test", "--tissue", "liver", "--size-mm", "60", "--resolution", "4", "--json", str(out))
+    result = run_one(*argv)
     assert result.returncode == 0, result.stderr
     assert "uniaxial tension to 10 %" in result.stdout and "picture-frame shear to 10 %" in result.stdout
     document = json.loads(out.read_text())
@@ -203,6 +213,6 @@ def test_tissue_test_prints_and_writes_both_tests(tmp_path: Path) -> None:
 
 def test_tissue_test_refuses_an_unknown_preset() -> None:
     """An unknown preset exits 1 with the preset names, and no traceback."""
-    result = _cli("tissue-test", "--tissue", "kidney")
+    result = run_one("tissue-test", "--tissue", "kidney")
     assert result.returncode == 1
     assert "liver" in result.stderr and "small-bowel" in result.stderr and "Traceback" not in result.stderr
