@@ -10,8 +10,7 @@ import pytest
 from policies.errors import ReproductionError
 from policies.reproduce import OUTCOME_FILE, PAPER_TABLE1, Run, RunOutcome, plan, reproduce, table_blocks
 from policies.toy_env import TOY_TASK_ID
-
-TINY = {"random_steps": 50, "updates_per_episode": 2, "batch_size": 16, "hidden_sizes": (16,), "bc_pretrain_steps": 5}
+from tests.policies.conftest import TINY, ToyReproduction
 
 
 def test_plan_covers_table1_and_the_demo_ablation(tmp_path: Path) -> None:
@@ -37,19 +36,15 @@ def test_tables_put_ours_beside_the_papers() -> None:
     assert "Table 2" in text and "50 +- 0 / 50" in text
 
 
-def test_reproduce_smoke_on_the_toy_task(tmp_path: Path) -> None:
+@pytest.mark.xdist_group("toy-reproduction")  # with the report's tests of the same reproduction
+def test_reproduce_smoke_on_the_toy_task(toy_reproduction: ToyReproduction) -> None:
     """reproduce trains runs in parallel processes and writes results.md with the tables and the curves."""
-    runs = plan(
-        tmp_path, episodes=2, tasks={"toy": TOY_TASK_ID}, algos=("ddpg", "ddpgbc"), seeds=(1, 2), demos=2,
-        eval_every=1, eval_episodes=1, overrides=TINY,
-    )  # fmt: skip
-    ended: list[RunOutcome] = []
-    path, outcomes = reproduce(tmp_path, runs, jobs=2, on_finished=ended.append)
+    runs, outcomes, ended = toy_reproduction.runs, toy_reproduction.outcomes, toy_reproduction.ended
     assert len(outcomes) == 4 and all(len(o.curve) == 2 for o in outcomes)
     assert sorted(o.run.out_dir.name for o in ended) == sorted(r.out_dir.name for r in runs)  # each, as it ended
-    text = path.read_text()
+    text = toy_reproduction.results_md.read_text()
     assert "| toy |" in text and "Table 1" in text
-    assert (tmp_path / "results-curves.png").stat().st_size > 1000
+    assert (toy_reproduction.out_dir / "results-curves.png").stat().st_size > 1000
 
 
 def test_reproduce_reads_finished_runs_instead_of_training_them_again(tmp_path: Path) -> None:

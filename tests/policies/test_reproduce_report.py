@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 import matplotlib.image
+import pytest
 
 from policies.reproduce import (
     CODE_DIRS,
@@ -21,7 +22,7 @@ from policies.reproduce import (
 )
 from policies.toy_env import TOY_TASK_ID
 from tests.chromium import RAW_REPR, render
-from tests.policies.test_reproduce import TINY
+from tests.policies.conftest import TINY, ToyReproduction
 
 
 def _outcome(task: str, algo: str, seed: int, demos: int, success: float, code: dict | None = None) -> RunOutcome:
@@ -75,15 +76,11 @@ def test_a_run_resumed_on_other_code_says_so(tmp_path: Path) -> None:
     assert "runs resumed on other code than they began on: toy-ddpg-d0-s1" in text
 
 
-def test_results_json_and_the_page(tmp_path: Path) -> None:
+@pytest.mark.xdist_group("toy-reproduction")  # with the smoke test of the same reproduction
+def test_results_json_and_the_page(toy_reproduction: ToyReproduction, tmp_path: Path) -> None:
     """results.json holds every cell beside the paper and every run's curve and code; the page renders in
     headless Chromium with both figures, rounded numbers and no raw values."""
-    runs = plan(
-        tmp_path / "runs", episodes=2, tasks={"toy": TOY_TASK_ID}, algos=("ddpg", "ddpgbc"), seeds=(1, 2), demos=2,
-        eval_every=1, eval_episodes=1, overrides=TINY,
-    )  # fmt: skip
-    reproduce(tmp_path, runs, jobs=2, command="tissue-retract reproduce --budget 2")
-    results = json.loads((tmp_path / "results.json").read_text())
+    results = json.loads((toy_reproduction.out_dir / "results.json").read_text())
     here = code_identity()
     if here and not here["uncommitted_changes"]:
         assert results["code"] == here and results["commit"] == here["commit"]
@@ -105,7 +102,7 @@ def test_results_json_and_the_page(tmp_path: Path) -> None:
     assert all(machine["packages"][name] for name in ("numpy", "pybullet", "pin")), machine
 
     screenshot = tmp_path / "page.png"
-    text, layout = render(tmp_path / "results.html", screenshot)
+    text, layout = render(toy_reproduction.out_dir / "results.html", screenshot)
     assert RAW_REPR.search(text) is None, RAW_REPR.search(text)
     assert "tissue-retract reproduce --budget 2" in text
     assert layout["overflow"] <= 0, "the page is wider than the window"
