@@ -17,6 +17,8 @@ calibration the chain's commanded acceleration, which the arm tracks), the ``dvr
 the calibrated error with no acceleration at all, for scale. Ratios are model over real: the presets' error
 statistics should be within 25 % of the real ones (0.75-1.25) in the bins a log covers. A bin of fewer than
 :data:`THIN_SAMPLES` samples is marked thin (``thin`` in the JSON): its RMS is a few samples', not the bin's.
+After each table one line judges the preset (``dvrk``, ``dvrk-calibrated``) on the bins that are not thin:
+within 0.75-1.25 x in every one, or ``MISMATCH`` with the ratios' range (``agreement`` in the JSON).
 
 With ``--write-arm OUT.json --held-out LOG`` it first identifies an arm: ``calibrate-wrench``'s model fitted
 on the ``--from`` logs, its residual (spread and correlation time per joint) measured on the held-out log,
@@ -276,12 +278,53 @@ def _compare(log: PreparedLog, columns: dict[str, np.ndarray]) -> dict[str, Any]
     }
 
 
-def _print(title: str, result: dict[str, Any]) -> None:
+#: The ratios of a model's error RMS to the logged one within which the model describes the log's sensing.
+AGREEMENT = (0.75, 1.25)
+
+
+def agreement(result: dict[str, Any], name: str) -> dict[str, Any]:
+    """Whether the column ``name`` is within :data:`AGREEMENT` of the logged column in every bin of
+    :data:`THIN_SAMPLES` or more (by insertion and by tip speed): ``within``, the ratios' range and the bins
+    judged."""
+    logged = result["columns"][0]
+    ratios = [
+        row[name] / row[logged]
+        for row in (*result["by_depth"], *result["by_speed"])
+        if not row["thin"] and row[logged] > 0.0
+    ]
+    low, high = AGREEMENT
+    return {
+        "within": bool(ratios) and all(low <= r <= high for r in ratios),
+        "ratio_min": min(ratios, default=None),
+        "ratio_max": max(ratios, default=None),
+        "bins_judged": len(ratios),
+    }
+
+
+def _agreement_line(result: dict[str, Any], name: str) -> str:
+    """The verdict of :func:`agreement` in one line."""
+    verdict, logged = result["agreement"][name], result["columns"][0]
+    low, high = AGREEMENT
+    if not verdict["bins_judged"]:
+        return f"  {name}: no bin of {THIN_SAMPLES} samples or more to judge it on"
+    spread = f"{verdict['ratio_min']:.2f}-{verdict['ratio_max']:.2f} x the error of {logged!r}"
+    if verdict["within"]:
+        return f"  {name}: within {low:g}-{high:g} x in every bin of {THIN_SAMPLES} samples or more ({spread})"
+    return (
+        f"  MISMATCH: {name} is {spread} in the bins of {THIN_SAMPLES} samples or more, not within {low:g}-{high:g} x: "
+        f"figures computed with it describe another sensor than this log's"
+    )
+
+
+def _print(title: str, result: dict[str, Any], judged: tuple[str, ...] = ()) -> None:
     names = result["columns"]
     overall = ", ".join(f"{n} {result['rms_n'][n]:.2f}" for n in names)
     print(f"{title} ({result['samples']} samples), RMS [N]: {overall}")
     print("\n".join(_table("insertion", result["by_depth"], names, "cm")))
     print("\n".join(_table("tip speed", result["by_speed"], names, "m/s")))
+    result["agreement"] = {name: agreement(result, name) for name in judged}
+    for name in judged:
+        print(_agreement_line(result, name))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -316,7 +359,7 @@ def run(args: argparse.Namespace) -> int:
                 },
             ),
         }
-        _print(f"{path}: the console's free-space estimate", entry["console"])
+        _print(f"{path}: the console's free-space estimate", entry["console"], ("dvrk preset",))
         if calibration is not None:
             error = check_calibration(calibration, [log])
             entry["calibrated"] = _compare(
@@ -329,7 +372,12 @@ def run(args: argparse.Namespace) -> int:
                     "no acceleration": error.after_live_n,
                 },
             )
-            _print(f"{path}: calibrated by {args.calibration}", entry["calibrated"])
+            _print(f"{path}: calibrated by {args.calibration}", entry["calibrated"], ("dvrk-calibrated",))
+            if not entry["calibrated"]["agreement"]["dvrk-calibrated"]["within"]:
+                print(
+                    "  (tune-safety and robustness take this calibration's bound as their sensing with "
+                    f"--wrench-calibration {args.calibration}, in place of --force-sensing dvrk-calibrated)"
+                )
         results["logs"][path] = entry
     if args.json:
         write_strict_json(args.json, results, field="--json")
