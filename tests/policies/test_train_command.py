@@ -23,6 +23,7 @@ from policies.recipe import DEFAULT_RECIPE, ROBUST_RECIPE
 from policies.toy_env import TOY_TASK_ID
 from policies.trainer import RunSpec, _demonstrations, ensure_registered, evaluate, train
 from psm_control.errors import ConfigurationError
+from tests.forked_cli import run_forked
 from tissue_retract.cli import main
 
 
@@ -68,26 +69,16 @@ def test_train_smoke(task: str, algo: str, tmp_path: Path, capsys: pytest.Captur
 
 def test_train_command_line(tmp_path: Path) -> None:
     """The installed command trains, logs to TensorBoard and resumes when run again with more episodes."""
-    base = [
-        sys.executable,
-        "-m",
-        "tissue_retract",
-        "train",
-        "--task",
-        TOY_TASK_ID,
-        "--algo",
-        "ddpg",
-        "--out",
-        str(tmp_path),
-    ]
-    base += ["--eval-every", "1", "--eval-episodes", "1", "--set", "random_steps=50", "--set", "updates_per_episode=2"]
-    first = subprocess.run([*base, "--episodes", "1"], capture_output=True, text=True, timeout=300, check=False)
+    args = ["train", "--task", TOY_TASK_ID, "--algo", "ddpg", "--out", str(tmp_path), "--eval-every", "1"]
+    args += ["--eval-episodes", "1", "--set", "random_steps=50", "--set", "updates_per_episode=2"]
+    command = [sys.executable, "-m", "tissue_retract", *args, "--episodes", "1"]
+    first = subprocess.run(command, capture_output=True, text=True, timeout=300, check=False)
     assert first.returncode == 0, first.stderr
     assert "throughput:" in first.stdout and list((tmp_path / "tb").iterdir())
-    second = subprocess.run([*base, "--episodes", "2"], capture_output=True, text=True, timeout=300, check=False)
+    # Run again as a new process would, forked from this one: without importing torch and the simulation again.
+    second, bad = run_forked([[*args, "--episodes", "2"], [*args, "--set", "gamma=2"]], parallel=1)
     assert second.returncode == 0, second.stderr
     assert "resumed from episode 1" in second.stdout
-    bad = subprocess.run([*base, "--set", "gamma=2"], capture_output=True, text=True, timeout=300, check=False)
     assert bad.returncode == 1 and "gamma=2" in bad.stderr and "[0, 1)" in bad.stderr
 
 
