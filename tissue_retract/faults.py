@@ -6,7 +6,8 @@ fault: a policy that raises, exits, returns garbage or overruns; a non-finite me
 topic; a tracking error; an arm disabled mid-episode or never enabled; a console that dies; a console whose
 clock on ``measured_js`` freezes, goes back or jumps (``sim-dvrk --stamp-fault``); a stop signal; a SIGKILL
 of the deploy. :func:`run_fault` reports the exit status, the hold line and what the recording
-kept. ``tissue-retract bench faults`` runs them all; the tests run them one by one.
+kept. ``tissue-retract bench faults`` runs them all; the tests run them one by one, those that leave their
+console as they found it on one :class:`SharedConsole`.
 
 Nothing here is timed by sleeping: the faulty policies (:class:`FaultPolicy`) act at a chosen episode
 and step and print a line there (``fault policy: episode E step S``), after that step's ticks; the
@@ -55,6 +56,7 @@ __all__ = [
     "Hang",
     "Raises",
     "ReturnsNan",
+    "SharedConsole",
     "Slow",
     "WrongShape",
     "run_fault",
@@ -68,6 +70,10 @@ GATE_VARIABLE = "TISSUE_RETRACT_FAULT_GATE"
 MARK = "fault policy: episode"
 #: Actions that act before the deploy's first step (no policy line to wait for).
 _AT_START = ("early:", "calibration", "listener", "other-console")
+#: Actions whose fault runs on a console of its own: the console killed, the arm disabled or commanded by
+#: another node (the console then says so on ``error`` or ``warning``), a calibration interrupted with the arm
+#: mid-excitation, and a NaN that must reach the deploy before any console serves the arm.
+_OWN_CONSOLE = ("kill-console", "disable", "rogue", "second-deploy", "interrupt-calibration", "early:")
 #: A refused or stopped run's files: none (the table's recording column).
 NOTHING_WRITTEN = "nothing written"
 #: Longest a gated or hanging policy waits before giving up (a guard; the runner acts long before) [s].
@@ -209,6 +215,19 @@ class Fault:
     default_budget: bool = False
     also: tuple[str, ...] = ()
     console: tuple[str, ...] = ()
+
+    @property
+    def shares_console(self) -> bool:
+        """Whether the fault can run on a :class:`SharedConsole` (a default ``sim-dvrk --task lift``): one whose
+        deploy starts each episode with a reset of the task scene (no dry run) and that leaves the console as it
+        found it (see :data:`_OWN_CONSOLE`)."""
+        return (
+            self.target == "dvrk"
+            and self.status != 1
+            and not self.console
+            and not {"--perception", "--dry-run"} & set(self.extra)
+            and not self.action.startswith(_OWN_CONSOLE)
+        )
 
     @property
     def leaves_nothing(self) -> bool:
@@ -477,6 +496,21 @@ class _Lines:
                 return True
         return False
 
+    def arrived(self) -> list[str]:
+        """Collect the lines that have arrived, without waiting; return those new since the last collection."""
+        start = len(self.lines)
+        while not self.ended:
+            try:
+                line = self._queue.get_nowait()
+            except queue.Empty:
+                break
+            if line is None:
+                self.ended = True
+                self._queue.put(None)
+            else:
+                self.lines.append(line)
+        return self.lines[start:]
+
     def rest(self, timeout_s: float) -> str:
         """Everything up to the end of the output."""
         self.wait_for("\0never\0", timeout_s)
@@ -502,6 +536,51 @@ def _start(command: list[str], env: dict[str, str]) -> subprocess.Popen[str]:
         process_group=0,
         preexec_fn=end_with_parent(),
     )
+
+
+def _console_command(domain_id: int, *more: str) -> list[str]:
+    """``sim-dvrk`` serving the faults' task scene on ``domain_id``, with ``more`` arguments."""
+    server = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--domain-id", str(domain_id)]
+    return [*server, "--task", "lift", "--seed", str(SEED), *more]
+
+
+#: What a console logs when it says something on its ``warning`` or ``error`` topics (or fails).
+_SAID = ("[WARN]", "[ERROR]", "[FATAL]", "Traceback")
+
+
+class SharedConsole:
+    """One ``sim-dvrk --task lift`` on ``domain_id`` for the faults that leave their console as they found it.
+
+    Given to :func:`run_fault` for each such fault (:attr:`Fault.shares_console`) in turn, it serves the fault
+    in place of a console of its own: the console's start-up, and the arm's enable and home by the deploy, are
+    paid once. Faults run on it one at a time, each after every process of the one before has ended, so the
+    deploy that joins the domain meets the console alone. A console that ended, or said anything on its
+    ``warning`` or ``error`` topics (``error`` keeps its history for the next deploy), is stopped, and the next
+    fault starts a fresh one; so is one whose domain another machine user's arm turned out to share.
+    """
+
+    def __init__(self, domain_id: int) -> None:
+        self.domain_id = domain_id
+        self._process: subprocess.Popen[str] | None = None
+        self._output: _Lines | None = None
+
+    def take(self) -> subprocess.Popen[str]:
+        """The console, started if there is none or the last one may not serve another fault."""
+        if self._process is not None and self._output is not None:
+            said = [line for line in self._output.arrived() if any(level in line for level in _SAID)]
+            if said or self._process.poll() is not None:
+                self.close()
+        if self._process is None:
+            # The console's output is read all along: a full pipe would stop it mid-row.
+            self._process = _start(_console_command(self.domain_id), _child_env(self.domain_id))
+            self._output = _Lines(self._process)
+        return self._process
+
+    def close(self) -> None:
+        """Stop the console (the next :meth:`take` starts a new one)."""
+        if self._process is not None:
+            _stop(self._process)
+        self._process = self._output = None
 
 
 def _stop(process: subprocess.Popen[str], timeout_s: float = 30.0) -> None:
@@ -657,6 +736,7 @@ def run_fault(
     *,
     guard_s: float = 300.0,
     retry_domains: Sequence[int] | None = None,
+    console: SharedConsole | None = None,
 ) -> FaultResult:
     """Run one fault in ``workdir`` on ROS domain ``domain_id``; return what happened.
 
@@ -665,18 +745,31 @@ def run_fault(
     conflict`` the fault does not explain), the fault runs again on ``retry_domains`` in turn (default: two
     others, 37 and 74 ids on). A caller that shares the machine's domains with other runs of its own (test
     workers) names domains only it uses.
+
+    With ``console`` (serving ``domain_id``), a fault that :attr:`~Fault.shares_console` runs against it; a
+    retry runs on a console of its own.
+
+    Raises:
+        ConfigurationError: ``console`` serves another domain, or the fault does not share a console.
     """
+    if console is not None and (console.domain_id != domain_id or not fault.shares_console):
+        why = f"a console of domain {domain_id}, for a fault that shares it"
+        raise ConfigurationError("console", f"domain {console.domain_id} for {fault.name!r}", why)
     if retry_domains is None:
         retry_domains = [1 + (domain_id - 1 + 37 * attempt) % 100 for attempt in (1, 2)]
     for domain in (domain_id, *retry_domains):
-        result = _run_fault(fault, workdir, domain, guard_s)
+        result = _run_fault(fault, workdir, domain, guard_s, console if domain == domain_id else None)
         shared = any(text in result.hold for text in ("publisher conflict", "another console"))
         if not shared or fault.explains(result.hold):
             break
+        if console is not None:
+            console.close()  # another user's arm is on its domain
     return result
 
 
-def _run_fault(fault: Fault, workdir: Path, domain_id: int, guard_s: float) -> FaultResult:
+def _run_fault(
+    fault: Fault, workdir: Path, domain_id: int, guard_s: float, shared: SharedConsole | None
+) -> FaultResult:
     workdir.mkdir(parents=True, exist_ok=True)
     env = _child_env(domain_id)
     env[AT_VARIABLE] = fault.at
@@ -689,11 +782,18 @@ def _run_fault(fault: Fault, workdir: Path, domain_id: int, guard_s: float) -> F
         else contextlib.nullcontext(workdir)
     )
     with disk as folder:
-        return _run_fault_in(fault, workdir, domain_id, guard_s, env, gate, folder / "run.mcap")
+        return _run_fault_in(fault, workdir, domain_id, guard_s, env, gate, folder / "run.mcap", shared)
 
 
 def _run_fault_in(
-    fault: Fault, workdir: Path, domain_id: int, guard_s: float, env: dict[str, str], gate: Path, record: Path
+    fault: Fault,
+    workdir: Path,
+    domain_id: int,
+    guard_s: float,
+    env: dict[str, str],
+    gate: Path,
+    record: Path,
+    shared: SharedConsole | None,
 ) -> FaultResult:
     record.unlink(missing_ok=True)
     deploy = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", f"{_MODULE}:{fault.policy}"]
@@ -720,10 +820,12 @@ def _run_fault_in(
     lines: _Lines | None = None
     process: subprocess.Popen[str] | None = None
     try:
-        if fault.target == "dvrk" and fault.status != 1:  # a refusal at start reaches no console
-            server = [sys.executable, "-m", "tissue_retract", "sim-dvrk", "--domain-id", str(domain_id)]
+        if shared is not None:
+            console = shared.take()
+        elif fault.target == "dvrk" and fault.status != 1:  # a refusal at start reaches no console
             camera = ("--blind", "--endoscope") if "--perception" in fault.extra else ()  # the jaw tells the grasp
-            console = _start([*server, "--task", "lift", "--seed", str(SEED), *camera, *fault.console], env)
+            console = _start(_console_command(domain_id, *camera, *fault.console), env)
+        if console is not None:
             dry = "--dry-run" in fault.extra and "not ready" not in fault.reason
             if dry or fault.action == "interrupt-calibration":
                 _ready_arm(env, domain_id, guard_s)
@@ -792,7 +894,7 @@ def _run_fault_in(
             process.wait()
         if injector is not None:
             injector.close()
-        if console is not None:
+        if console is not None and shared is None:
             _stop(console)
     ends = ("HOLD:", "interrupted (", ": error: ", ": stopped by ")
     hold = next((line.strip() for line in output.splitlines() if any(end in line for end in ends)), "")
