@@ -1,16 +1,19 @@
 """Hostile joint logs and calibration files through the real command line: one table, one row per input.
 
-Every row runs ``python -m tissue_retract ...`` in a fresh interpreter (``calibrate-wrench`` and ``bench sensing``,
-which share the log readers and checks), as a careless or hostile user would type it, its address space bounded
-(``RLIMIT_AS``) where the defect was memory. A refused row must exit non-zero with a message that names what is
-wrong, print no traceback, and leave no calibration behind; a row that must succeed (a long log, within its
-memory) must exit 0 and write it. The next check of a log's content is covered by adding a row; a log that is
-not a regular file (a device, a FIFO), is missing, empty, garbage or too large is a row of the one table of
-hostile files, ``tests/test_hostile_inputs.py``.
+Every row runs the real command line (``calibrate-wrench`` and ``bench sensing``, which share the log readers and
+checks) as a careless or hostile user would type it: in a child forked from this process (:mod:`tests.forked_cli`:
+what ``python -m tissue_retract ...`` would do, without importing scipy and the arm's model again for each row),
+or, where the defect was memory, ``python -m tissue_retract ...`` in a fresh interpreter with its address space
+bounded (``RLIMIT_AS``): a forked child's address space is the test's, not a command's. A refused row must exit
+non-zero with a message that names what is wrong, print no traceback, and leave no calibration behind; a row that
+must succeed (a long log, within its memory) must exit 0 and write it. The next check of a log's content is
+covered by adding a row; a log that is not a regular file (a device, a FIFO), is missing, empty, garbage or too
+large is a row of the one table of hostile files, ``tests/test_hostile_inputs.py``.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import resource
@@ -23,6 +26,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from arm_logs import arm_bag, arm_csv
+
+from tests.forked_cli import run_one
+
+# What calibrate-wrench imports once it reads a log (the fit, and scipy.signal with it): imported here once, so a
+# row's forked child starts with it as bench sensing's does (its command module imports the fit).
+importlib.import_module("hardware_if.wrench.fit")
 
 #: The address space of a row's child where the defect was memory (1.5 GiB): the interpreter with numpy, scipy,
 #: Pinocchio and rosbags loaded maps about 1 GB of it, most of it not resident; the fit of the long log below ran
@@ -142,9 +151,9 @@ def _limit(memory_bytes: int | None) -> Callable[[], None] | None:
     return lambda: resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
 
 
-def _run(row: Row, folder: Path) -> Row:
-    folder.mkdir()
-    argv = row.argv(folder)
+def _run_bounded(argv: list[str], row: Row) -> tuple[int | None, str]:
+    """``python -m tissue_retract ARGV`` in a fresh interpreter within ``row.memory_bytes``: its exit status (None
+    after the hang guard) and output."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")  # one BLAS thread: its buffers in the bound
     try:
         done = subprocess.run(
@@ -156,9 +165,20 @@ def _run(row: Row, folder: Path) -> Row:
             preexec_fn=_limit(row.memory_bytes),
             check=False,
         )
-        returncode, text = done.returncode, done.stdout + done.stderr
     except subprocess.TimeoutExpired as e:
-        returncode, text = None, f"no answer in {row.timeout_s:g} s: {e.stdout!r} {e.stderr!r}"
+        return None, f"no answer in {row.timeout_s:g} s: {e.stdout!r} {e.stderr!r}"
+    return done.returncode, done.stdout + done.stderr
+
+
+def _run(row: Row, folder: Path) -> Row:
+    folder.mkdir()
+    argv = row.argv(folder)
+    if row.memory_bytes is None:
+        forked = run_one(*argv, timeout_s=row.timeout_s)
+        text = forked.stdout + forked.stderr
+        returncode = None if f"(killed after {row.timeout_s:g} s)" in forked.stderr else forked.returncode
+    else:
+        returncode, text = _run_bounded(argv, row)
     written = (folder / "out.json").exists()
     ok = returncode == 0 and written if row.succeeds else returncode not in (0, None) and not written
     row.outcome = {
