@@ -64,33 +64,40 @@ def run_forked(
         running: dict[int, tuple[int, int, float]] = {}  # pidfd -> (index, pid, started)
         sys.stdout.flush()
         sys.stderr.flush()
-        while pending or running:
-            while pending and len(running) < parallel:
-                index, argv = pending.pop(0)
-                streams = (Path(folder) / f"{index}.out", Path(folder) / f"{index}.err")
-                pid = os.fork()
-                if pid == 0:
-                    _child(list(argv), *streams)
-                running[os.pidfd_open(pid)] = (index, pid, time.monotonic())
-            first_deadline = min(started for _, _, started in running.values()) + timeout_s
-            ready, _, _ = select.select(list(running), [], [], max(0.0, first_deadline - time.monotonic()))
-            now = time.monotonic()
-            for pidfd in list(running):
-                index, pid, started = running[pidfd]
-                if pidfd not in ready and now - started < timeout_s:
-                    continue
-                del running[pidfd]
-                os.close(pidfd)
+        try:
+            while pending or running:
+                while pending and len(running) < parallel:
+                    index, argv = pending.pop(0)
+                    streams = (Path(folder) / f"{index}.out", Path(folder) / f"{index}.err")
+                    pid = os.fork()
+                    if pid == 0:
+                        _child(list(argv), *streams)
+                    running[os.pidfd_open(pid)] = (index, pid, time.monotonic())
+                first_deadline = min(started for _, _, started in running.values()) + timeout_s
+                ready, _, _ = select.select(list(running), [], [], max(0.0, first_deadline - time.monotonic()))
+                now = time.monotonic()
+                for pidfd in list(running):
+                    index, pid, started = running[pidfd]
+                    if pidfd not in ready and now - started < timeout_s:
+                        continue
+                    del running[pidfd]
+                    os.close(pidfd)
+                    with contextlib.suppress(ProcessLookupError, PermissionError):
+                        os.killpg(pid, signal.SIGKILL)  # what it started; a hung child itself
+                    status = os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
+                    out, err = (Path(folder) / f"{index}{suffix}" for suffix in (".out", ".err"))
+                    stderr = err.read_text(errors="replace")
+                    if pidfd not in ready:
+                        stderr += f"\n(killed after {timeout_s:g} s)\n"
+                    results[index] = subprocess.CompletedProcess(
+                        list(argvs[index]), status, out.read_text(errors="replace"), stderr
+                    )
+        finally:  # the test stopped (a failure, its timeout, Ctrl-C): no child outlives it
+            for pidfd, (_, pid, _) in running.items():
                 with contextlib.suppress(ProcessLookupError, PermissionError):
-                    os.killpg(pid, signal.SIGKILL)  # what it started; a hung child itself
-                status = os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
-                out, err = (Path(folder) / f"{index}{suffix}" for suffix in (".out", ".err"))
-                stderr = err.read_text(errors="replace")
-                if pidfd not in ready:
-                    stderr += f"\n(killed after {timeout_s:g} s)\n"
-                results[index] = subprocess.CompletedProcess(
-                    list(argvs[index]), status, out.read_text(errors="replace"), stderr
-                )
+                    os.killpg(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                os.close(pidfd)
     return [r for r in results if r is not None]
 
 
