@@ -42,7 +42,8 @@ def test_the_arm_reproduces_a_log_of_its_own_efforts(tmp_path: Path) -> None:
     """On a log of the shipped arm's efforts and residual, its column and the dvrk preset's (the same arm) are within
     25 % of the logged console's."""
     bag = _bag(tmp_path / "own", identified_arm("wpi-psm"), 0.0, residual=True)
-    assert main(["bench", "sensing", "--from", str(bag), "--json", str(tmp_path / "out.json")]) == 0
+    # One draw of the models' residual (seed 0): both ratios within 3 % of 16 draws' (0.97), in a band of 25 %.
+    assert main(["bench", "sensing", "--from", str(bag), "--json", str(tmp_path / "out.json"), "--draws", "1"]) == 0
     result = json.loads((tmp_path / "out.json").read_text())["logs"][str(bag)]["console"]
     rms, logged = result["rms_n"], result["columns"][0]  # a bag does not say which console logged it
     assert logged == "logged console"
