@@ -34,7 +34,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -43,13 +43,15 @@ from psm_control.errors import ConfigurationError, TissueRetractError
 from psm_control.inputs import check_output_path, given_as
 from psm_control.outputs import write_atomic
 from psm_control.robot import PsmModel
-from safety.chain import ControlChain
 from safety.config import SafetyConfig
 from sim.force_sensing import error_bound_n, sensing_params
 from sim.sweep.stopping import handling
 from tissue_retract.cli._checks import float_in
 from tissue_retract.cli._next import command, console_words, say_next
 from tissue_retract.cli._ros import add_console_arguments, apply_console_arguments
+
+if TYPE_CHECKING:  # the chain (numba, the QP solvers): imported only when the arm moves
+    from safety.chain import ControlChain
 
 __all__ = ["add_arguments", "run"]
 
@@ -393,6 +395,8 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
     # on a real arm). The chain is told so, as deploy tells it for an uncalibrated dVRK: taken for a tissue
     # force, it made the retraction-force limit back the tool off along it and steered the excitation up to
     # the workspace box's top (measured: the limit intervened in 3491 of 3553 ticks).
+    from safety.chain import ControlChain
+
     config = dataclasses.replace(
         SafetyConfig(),
         control_rate_hz=100.0,
