@@ -12,7 +12,8 @@ import torch
 from policies.reproduce import Run, RunOutcome, plan, reproduce
 from policies.toy_env import TOY_TASK_ID
 
-#: Training settings small enough for a reproduction's run to take a second on the toy task.
+#: Training settings small enough for a reproduction's run of a few episodes on the toy task to take a fraction
+#: of a second.
 TINY = {"random_steps": 50, "updates_per_episode": 2, "batch_size": 16, "hidden_sizes": (16,), "bc_pretrain_steps": 5}
 
 
@@ -37,7 +38,8 @@ class ToyReproduction(NamedTuple):
 
 @pytest.fixture(scope="session")
 def toy_reproduction(tmp_path_factory: pytest.TempPathFactory) -> ToyReproduction:
-    """DDPG and DDPG+BC, two seeds each, trained in two processes as ``tissue-retract reproduce --budget 2``.
+    """DDPG and DDPG+BC, two seeds each, two episodes each, trained in a pool of two processes; its page
+    shows the command ``tissue-retract reproduce --budget 2``.
 
     Read-only: the tests that take it check different things of the same reproduction, which costs two
     spawned workers that each import torch and the simulation.
