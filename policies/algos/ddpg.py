@@ -12,12 +12,13 @@ critic; with tau = 0.005 targets the difference is one update of lag in the acto
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterable
 
 import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812 (the conventional name)
 
-from policies.algos.base import Agent, Batches, TensorBatch, adam, frozen, polyak
+from policies.algos.base import Agent, Batches, TensorBatch, frozen, polyak
 from policies.networks import Critic, DeterministicActor
 
 __all__ = ["DDPG"]
@@ -29,15 +30,18 @@ class DDPG(Agent):
     name = "ddpg"
 
     def build(self) -> None:
-        c, h = self.config, self.config.hidden
+        h = self.config.hidden
         self._actor = DeterministicActor(self.in_dim, self.dims.action, h)
         self.critic = Critic(self.in_dim, self.dims.action, h)
         self.actor_target = copy.deepcopy(self._actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
-        self.optimizer = adam([(self._actor.parameters(), c.lr_actor), (self.critic.parameters(), c.lr_critic)])
         self.critic_params: list[torch.Tensor] = list(self.critic.parameters())
         self.target_params: list[torch.Tensor] = [*self.critic_target.parameters(), *self.actor_target.parameters()]
         self.online_params: list[torch.Tensor] = [*self.critic_params, *self._actor.parameters()]
+
+    def optimizer_groups(self) -> list[tuple[Iterable[torch.Tensor], float]]:
+        c = self.config
+        return [(self._actor.parameters(), c.lr_actor), (self.critic.parameters(), c.lr_critic)]
 
     @property
     def actor(self) -> nn.Module:

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Iterable
 
 import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F  # noqa: N812 (the conventional name)
 
-from policies.algos.base import Agent, Batches, adam, frozen, polyak
+from policies.algos.base import Agent, Batches, frozen, polyak
 from policies.networks import GaussianActor, TwinCritic
 
 __all__ = ["SQIL"]
@@ -37,13 +38,14 @@ class SQIL(Agent):
         self.target_params: list[torch.Tensor] = list(self.critic_target.parameters())
         self.log_alpha = torch.tensor([math.log(c.sac_init_temperature)], requires_grad=True)
         self.target_entropy = -float(self.dims.action)
-        self.optimizer = adam(
-            [
-                (self._actor.parameters(), c.lr_actor),
-                (self.critic.parameters(), c.lr_critic),
-                ([self.log_alpha], c.lr_actor),
-            ]
-        )
+
+    def optimizer_groups(self) -> list[tuple[Iterable[torch.Tensor], float]]:
+        c = self.config
+        return [
+            (self._actor.parameters(), c.lr_actor),
+            (self.critic.parameters(), c.lr_critic),
+            ([self.log_alpha], c.lr_actor),
+        ]
 
     @property
     def actor(self) -> nn.Module:
