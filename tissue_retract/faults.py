@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from hardware_if.common.errors import DvrkTimeoutError
 from hardware_if.common.executor import make_executor
 from hardware_if.common.network import local_ros_env
 from hardware_if.recording.replay import load_recording, summarize_recording
@@ -72,8 +73,9 @@ MARK = "fault policy: episode"
 _AT_START = ("early:", "calibration", "listener", "other-console")
 #: Actions whose fault runs on a console of its own: the console killed, the arm disabled or commanded by
 #: another node (the console then says so on ``error`` or ``warning``), a calibration interrupted with the arm
-#: mid-excitation, and a NaN that must reach the deploy before any console serves the arm.
-_OWN_CONSOLE = ("kill-console", "disable", "rogue", "second-deploy", "interrupt-calibration", "early:")
+#: mid-excitation, an arm moved off its start with the jaw where the fault before left it, and a NaN that must
+#: reach the deploy before any console serves the arm.
+_OWN_CONSOLE = ("kill-console", "disable", "rogue", "second-deploy", "interrupt-calibration", "move-arm", "early:")
 #: A refused or stopped run's files: none (the table's recording column).
 NOTHING_WRITTEN = "nothing written"
 #: Longest a gated or hanging policy waits before giving up (a guard; the runner acts long before) [s].
@@ -218,15 +220,17 @@ class Fault:
 
     @property
     def shares_console(self) -> bool:
-        """Whether the fault can run on a :class:`SharedConsole` (a default ``sim-dvrk --task lift``): one whose
-        deploy starts each episode with a reset of the task scene (no dry run) and that leaves the console as it
-        found it (see :data:`_OWN_CONSOLE`)."""
+        """Whether the fault can run on a :class:`SharedConsole` (a default ``sim-dvrk --task lift``): one that
+        leaves the console as it found it (see :data:`_OWN_CONSOLE`) and needs no arm as a console starts it
+        (DISABLED). Its deploy resets the task scene before each episode; before a dry run, which resets none,
+        the runner does."""
         return (
             self.target == "dvrk"
             and self.status != 1
             and not self.console
-            and not {"--perception", "--dry-run"} & set(self.extra)
+            and "--perception" not in self.extra
             and not self.action.startswith(_OWN_CONSOLE)
+            and not self.reason.startswith("not ready")
         )
 
     @property
@@ -710,6 +714,39 @@ class _Injector:
                 return True
         return False
 
+    def reset_scene(self, seed: int, timeout_s: float) -> None:
+        """Ask the console for the task scene's episode ``seed``, as a deploy does before each episode; return
+        once its count of resets says the new scene is there."""
+        from std_msgs.msg import Int64  # type: ignore[import-untyped]  # the ros extra
+
+        from hardware_if.common.crtk import periodic_qos
+        from hardware_if.common.task_topics import task_topic
+
+        counts: list[int] = []
+
+        def on_count(message: Any) -> None:
+            counts.append(int(message.data))
+
+        self.node.create_subscription(Int64, task_topic(self.arm, "resets"), on_count, periodic_qos())
+        reset = self.node.create_publisher(Int64, task_topic(self.arm, "reset"), periodic_qos())
+        executor = make_executor(self.context)
+        executor.add_node(self.node)
+        deadline = time.monotonic() + timeout_s
+
+        def spin_until(done: Any, what: str) -> None:
+            while not done():
+                if time.monotonic() > deadline:
+                    raise DvrkTimeoutError(what, timeout_s)
+                executor.spin_once(timeout_sec=0.05)
+
+        try:
+            spin_until(lambda: counts and reset.get_subscription_count() > 0, f"{task_topic(self.arm, 'resets')}")
+            before = counts[-1]
+            reset.publish(Int64(data=seed))
+            spin_until(lambda: counts[-1] != before, f"a reset of the task scene (seed {seed})")
+        finally:
+            executor.shutdown()
+
     def close(self) -> None:
         self.closed = True
         self.node.destroy_node()
@@ -827,6 +864,8 @@ def _run_fault_in(
             console = _start(_console_command(domain_id, *camera, *fault.console), env)
         if console is not None:
             dry = "--dry-run" in fault.extra and "not ready" not in fault.reason
+            if dry and shared is not None:
+                _reset_scene(domain_id, guard_s)  # the scene as a fresh console's: a dry run resets none itself
             if dry or fault.action == "interrupt-calibration":
                 _ready_arm(env, domain_id, guard_s)
         if fault.action.startswith(("nan:", "early:", "tracking", "disable", "rogue", "console", "second-", "dead-")):
@@ -913,6 +952,16 @@ def _spin_until_closed(executor: Any, injector: _Injector) -> None:
             executor.spin_once(timeout_sec=0.05)
         except Exception:  # the context was shut down from under the spin: the listener is done
             return
+
+
+def _reset_scene(domain_id: int, guard_s: float) -> None:
+    """A shared console's task scene back to the faults' first episode (seed :data:`SEED`), by a node that is
+    gone before the deploy joins the domain."""
+    injector = _Injector(domain_id)
+    try:
+        injector.reset_scene(SEED, guard_s)
+    finally:
+        injector.close()
 
 
 def _calibration_file(action: str, workdir: Path) -> Path:
