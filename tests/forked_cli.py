@@ -21,10 +21,11 @@ import sys
 import tempfile
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import NoReturn
 
-__all__ = ["run_forked", "run_one"]
+__all__ = ["default_signals", "end_as_the_interpreter", "run_forked", "run_one", "standard_streams"]
 
 #: Modules the commands import once their arguments are checked: imported here once, not in every child.
 PRELOAD = (
@@ -109,17 +110,13 @@ def run_one(*args: str, timeout_s: float = 300.0) -> subprocess.CompletedProcess
 
 def _child(argv: list[str], stdout: Path, stderr: Path) -> None:
     """In the forked child: run the command as ``python -m tissue_retract`` would, then leave at once."""
-    status = 1
     atexit._clear()  # this process's exit handlers are the test's: the child runs only those it registers
-    try:
+
+    def command() -> int | None:
         os.setpgid(0, 0)
-        for fd, path in ((1, stdout), (2, stderr)):
-            os.dup2(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), fd)
-        sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), line_buffering=True)
-        sys.stderr = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), line_buffering=True)
-        sys.stdin = io.TextIOWrapper(io.FileIO(os.open(os.devnull, os.O_RDONLY), "r"))
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGALRM):
-            signal.signal(sig, signal.SIG_DFL)
+        out, err = (os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600) for path in (stdout, stderr))
+        standard_streams(out, err)
+        default_signals(signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGALRM)
         signal.signal(signal.SIGINT, signal.default_int_handler)  # as a fresh interpreter has it
         signal.pthread_sigmask(signal.SIG_SETMASK, set())
         if "torch" in sys.modules:
@@ -130,7 +127,35 @@ def _child(argv: list[str], stdout: Path, stderr: Path) -> None:
         from tissue_retract.cli import main
 
         sys.argv = [tissue_retract.__main__.__file__, *argv]
-        status = main(argv)
+        return main(argv)
+
+    end_as_the_interpreter(command, exit_handlers=True)
+
+
+def standard_streams(stdout_fd: int, stderr_fd: int) -> None:
+    """In a forked child: file descriptors 1 and 2 become ``stdout_fd`` and ``stderr_fd`` (the same one for one
+    stream of both), Python's streams are made anew on them, line-buffered, and stdin reads nothing."""
+    os.dup2(stdout_fd, 1)
+    os.dup2(stderr_fd, 2)
+    sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), line_buffering=True)
+    sys.stderr = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), line_buffering=True)
+    sys.stdin = io.TextIOWrapper(io.FileIO(os.open(os.devnull, os.O_RDONLY), "r"))
+
+
+def default_signals(*signals: signal.Signals) -> None:
+    """In a forked child: ``signals`` back to their default actions (the test's handlers are not the command's)."""
+    for sig in signals:
+        signal.signal(sig, signal.SIG_DFL)
+
+
+def end_as_the_interpreter(command: Callable[[], int | None], *, exit_handlers: bool) -> NoReturn:
+    """In a forked child: run ``command`` (its set-up and a command's ``main``) and end the process as the
+    interpreter ends ``python -m tissue_retract``: ``main``'s status, a ``SystemExit``'s code or message, the
+    traceback of an exception that escapes (status 1); then the exit handlers the child registered
+    (``exit_handlers``), the streams flushed, and ``os._exit``: never the test's own clean-up."""
+    status: int = 1
+    try:
+        status = command() or 0
     except SystemExit as e:  # what the interpreter makes of it
         if e.code is None or isinstance(e.code, int):
             status = e.code or 0
@@ -139,8 +164,9 @@ def _child(argv: list[str], stdout: Path, stderr: Path) -> None:
     except BaseException:  # an exception escaping main: the traceback the interpreter would print
         traceback.print_exc()
     finally:
-        with contextlib.suppress(BaseException):
-            atexit._run_exitfuncs()
+        if exit_handlers:
+            with contextlib.suppress(BaseException):
+                atexit._run_exitfuncs()
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(BaseException):  # the child must reach _exit whatever happened
                 stream.flush()

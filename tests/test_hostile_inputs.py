@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import io
 import json
 import os
 import resource
@@ -38,7 +37,6 @@ import stat
 import sys
 import tempfile
 import time
-import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +49,7 @@ from hardware_if.recording.recorder import Recorder
 from hardware_if.wrench.bag_writer import write_joint_bag
 from hardware_if.wrench.joint_logs import JointLog
 from policies.toy_env import TOY_TASK_ID
+from tests.forked_cli import default_signals, end_as_the_interpreter, standard_streams
 from tests.ros.domains import worker_domain_id
 
 #: Longest a case may take [s]: a refusal takes well under a second; a command that got past its check runs,
@@ -516,37 +515,22 @@ def _prepare(tmp: Path, row: Row, variant: Variant) -> Case:
 
 def _child(case: Case) -> None:
     """In the forked child: run the command as ``python -m tissue_retract`` would, then leave at once."""
-    status = 1
-    try:
+
+    def command() -> int | None:
         os.setpgid(0, 0)  # its own process group: what it starts is ended with it
         os.chdir(case.folder)
         fd = os.open(case.output, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        os.dup2(fd, 1)
-        os.dup2(fd, 2)
-        sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), line_buffering=True)
-        sys.stderr = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), line_buffering=True)
-        sys.stdin = io.TextIOWrapper(io.FileIO(os.open(os.devnull, os.O_RDONLY), "r"))
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGALRM):
-            signal.signal(sig, signal.SIG_DFL)
+        standard_streams(fd, fd)
+        default_signals(signal.SIGINT, signal.SIGTERM, signal.SIGALRM)
         mapped = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # at least what is mapped
         size = int(Path("/proc/self/statm").read_text().split()[0]) * os.sysconf("SC_PAGE_SIZE")
         limit = max(mapped, size) + EXTRA_MEMORY_BYTES
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
         from tissue_retract.cli import main
 
-        status = main(case.argv)
-    except SystemExit as e:  # what the interpreter makes of it
-        if e.code is None or isinstance(e.code, int):
-            status = e.code or 0
-        else:
-            print(e.code, file=sys.stderr)
-    except BaseException:  # an exception escaping main: the traceback the interpreter would print
-        traceback.print_exc()
-    finally:
-        for stream in (sys.stdout, sys.stderr):
-            with contextlib.suppress(BaseException):  # the child must reach _exit whatever happened
-                stream.flush()
-        os._exit(status if 0 <= status < 256 else 1)
+        return main(case.argv)
+
+    end_as_the_interpreter(command, exit_handlers=False)
 
 
 def _run_all(cases: list[Case]) -> None:
