@@ -102,8 +102,7 @@ class WrenchCalibration:
 
     def sensing_regime(self) -> SensingRegime:
         """Where :attr:`error_bound_with_acceleration_n` holds, for the safety filter; :attr:`error_bound_n` beyond."""
-        covered = self.covered_acceleration or (None,) * 6
-        return SensingRegime(np.array([math.inf if v is None else v for v in covered]), self.error_bound_n)
+        return SensingRegime(_acceleration_limits(self.covered_acceleration), self.error_bound_n)
 
     def regime_words(self) -> str:
         """The motions :attr:`error_bound_with_acceleration_n` bounds, for a user."""
@@ -150,8 +149,12 @@ def within_accelerations(covered: tuple[float | None, ...] | None, qdd: np.ndarr
     magnitude = np.abs(np.asarray(qdd, dtype=float))
     if covered is None:
         return np.ones(magnitude.shape[:-1], dtype=bool)
-    limits = np.array([math.inf if v is None else v for v in covered])
-    return np.asarray(np.all(magnitude <= limits, axis=-1))
+    return np.asarray(np.all(magnitude <= _acceleration_limits(covered), axis=-1))
+
+
+def _acceleration_limits(covered: tuple[float | None, ...] | None) -> np.ndarray:
+    """``covered`` per joint as an array (6,), inf where nothing limits it (a joint, or a file, without one)."""
+    return np.array([math.inf if v is None else v for v in covered or (None,) * 6])
 
 
 _FIGURES = (
