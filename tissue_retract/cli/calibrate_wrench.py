@@ -8,8 +8,9 @@ recordings, the public WPI and radiang CSV layouts)::
 
 The first fits on the ``--from`` logs and checks on ``--held-out`` (default: the last ``--from`` log when there
 are several, else the last third of the one); the second prints the free-space force error of the console's
-estimate and of the calibrated one on the logs, overall and by insertion depth and tool-tip speed, and its
-verdict: whether the file's bounds held on the samples inside the regimes they cover (exit 1 when not).
+estimate and of the calibrated one on the logs, overall and by insertion depth and tool-tip speed, what a tare
+at the grasp would leave of it (:mod:`hardware_if.wrench.drift`), and its verdict: whether the file's bounds held
+on the samples inside the regimes they cover (exit 1 when not).
 A log is fitted or checked on only when it shows an arm moving under its own dynamics
 (:func:`hardware_if.wrench.joint_logs.check_free_space_log`).
 
@@ -88,7 +89,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "/ARM/measured_js, deploy recordings with efforts, WPI or radiang CSV logs",
     )
     parser.add_argument("--held-out", nargs="+", metavar="PATH", help="logs to check the offline fit on")
-    parser.add_argument("--check", metavar="F.json", help="print a calibration's free-space error on the --from logs")
+    parser.add_argument(
+        "--check",
+        metavar="F.json",
+        help="print a calibration's free-space error on the --from logs, what a tare at the grasp would leave of it, "
+        "and whether the file's bounds held (exit 1 when not)",
+    )
     parser.add_argument("--json", metavar="OUT.json", help="with --check: write the figures as JSON")
     parser.add_argument(
         "--rate", type=float_in(1.0, 10000.0), default=None, help="sample rate of CSV logs [Hz] (default by layout)"
@@ -268,6 +274,7 @@ def _table(summary: dict[str, Any]) -> str:
 def _offline(args: argparse.Namespace) -> int:
     """Fit on logs or check a calibration on them; 0, or 1 with the reason."""
     from hardware_if.wrench.calibration import read_calibration
+    from hardware_if.wrench.drift import change_line, error_change
     from hardware_if.wrench.fit import (
         bound_verdict,
         check_calibration,
@@ -292,8 +299,10 @@ def _offline(args: argparse.Namespace) -> int:
         error = check_calibration(calibration, logs)
         print(f"the logs cover {coverage_line(logs)}")
         verdict = bound_verdict(calibration, error)
-        summary = error.summary() | verdict
+        change = error_change(calibration, logs)
+        summary = error.summary() | verdict | {"error_change_one_way": change}
         print(_table(summary))
+        print(change_line(change))
         print(verdict_line(verdict))
         if args.json:
             write_atomic(args.json, json.dumps(summary, indent=2) + "\n", "--json")

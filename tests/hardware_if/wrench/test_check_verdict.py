@@ -1,13 +1,17 @@
-"""calibrate-wrench --check: a verdict on the file's bounds, judged inside the regimes they cover, and its exit."""
+"""calibrate-wrench --check: a verdict on the file's bounds, judged inside the regimes they cover, and its exit; and
+what a tare at the grasp would leave of the error."""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
-from arm_logs import arm_bag
+from arm_logs import RATE_HZ, arm_bag
 
+from psm_control.robot import PsmModel
 from tests.conftest import run_cli
 
 SAMPLES = 3000
@@ -76,3 +80,44 @@ def test_the_written_bounds_are_never_below_the_held_out_log_or_the_floor(fitted
     assert calibration["error_bound_n"] >= max(
         calibration["max_after_without_acceleration_n"], calibration["max_after_n"], 0.5
     )
+
+
+def _with_tip_force(force_n: Callable[[np.ndarray], np.ndarray]) -> Callable[..., None]:
+    """An ``arm_bag`` edit that adds to the efforts what a force on the tip ``force_n(t)`` (samples, 3) [N] makes:
+    ``J^T [f; 0]``, so that the console's estimate reads it exactly."""
+
+    def edit(q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+        configuration = PsmModel().configuration()
+        force = force_n(np.arange(len(q)) / RATE_HZ)
+        for k in range(len(q)):
+            configuration.update(q[k])
+            effort[k] += configuration.base_jacobian()[:3].T @ force[k]
+
+    return edit
+
+
+def test_the_check_says_what_a_tare_at_the_grasp_would_leave(fitted: dict[str, Path], tmp_path: Path) -> None:
+    """An error that stays put (a constant 1.5 N on the tip) is in the untared error but not in its change over a
+    one-way pull; one that drifts (1.5 N/s) is in the change, in proportion to the pull's length. The same motion:
+    the same pairs of samples."""
+
+    def check(name: str, force_n: Callable[[np.ndarray], np.ndarray] | None) -> list[dict]:
+        edit = _with_tip_force(force_n) if force_n is not None else None
+        log = arm_bag(tmp_path / name, SAMPLES, 2.0, noise=0.002, edit=edit)
+        report = tmp_path / f"{name}.json"
+        done = run_cli(
+            "calibrate-wrench", "--check", str(fitted["calibration"]), "--from", str(log), "--json", str(report)
+        )
+        assert "a tare at the grasp would leave the error's change over a one-way pull" in done.stdout, done.stdout
+        return json.loads(report.read_text())["error_change_one_way"]
+
+    clean = check("clean", None)
+    offset = check("steady", lambda t: np.tile([1.5, 0.0, 0.0], (len(t), 1)))
+    drift = check("drift", lambda t: np.outer(1.5 * t, [0.0, 1.0, 0.0]))
+    assert [row["lag_s"] for row in clean] == [0.2, 0.5, 1.0, 2.0]
+    for plain, put, moved in zip(clean, offset, drift, strict=True):
+        assert plain["pairs"] > 0 and put["pairs"] == moved["pairs"] == plain["pairs"], (plain, put, moved)
+        assert put["rms_change_n"] == pytest.approx(plain["rms_change_n"], rel=1e-6)
+        assert put["max_change_n"] == pytest.approx(plain["max_change_n"], rel=1e-6)
+        assert put["max_error_n"] > plain["max_error_n"] + 1.0
+        assert abs(moved["max_change_n"] - 1.5 * plain["lag_s"]) <= plain["max_change_n"] + 1e-9
