@@ -67,6 +67,12 @@ def stop_reason(record: Mapping[str, Any]) -> str | None:
     return f"{STALL} ({'travel bound' if source == 'travel' else 'measured force'})"
 
 
+def _largest_peak(records: Sequence[Mapping[str, Any]]) -> float | None:
+    """The largest true peak force of ``records`` [N] (None: none recorded one)."""
+    peaks = [float(r["peak_force_n"]) for r in records if r.get("peak_force_n") is not None]
+    return max(peaks) if peaks else None
+
+
 def _share(count: int | None, total: int) -> float | None:
     """``count`` of ``total`` as a fraction (None of no episodes)."""
     return None if count is None or total == 0 else count / total
@@ -89,6 +95,9 @@ class StiffnessFifth:
         stopped_by: What ended the policy's unsuccessful episodes: their failure classes, the force limit's split
             by what its bound was on (``force_limit_stall (travel bound)``: the grasp point's travel, where the
             sensing cannot tell the limit; ``force_limit_stall (measured force)``), with counts.
+        largest_peak_n: The largest true peak retraction force of the policy's trials [N] (None: none recorded):
+            with exact sensing, what a retraction of this stiffness needed; the room a force limit must leave.
+        expert_largest_peak_n: The same of the expert's episodes.
     """
 
     stiffness_low_kpa: float
@@ -100,6 +109,8 @@ class StiffnessFifth:
     expert_successes: int | None = None
     expert_force_limit_stall_episodes: int | None = None
     stopped_by: dict[str, int] = dataclasses.field(default_factory=dict)
+    largest_peak_n: float | None = None
+    expert_largest_peak_n: float | None = None
 
     @property
     def thin(self) -> bool:
@@ -118,6 +129,7 @@ class StiffnessFifth:
             "force_limit_stall_episodes": self.force_limit_stall_episodes,
             "force_limit_stall": self.force_limit_stall_episodes / self.trials,
             "stopped_by": dict(self.stopped_by),
+            "largest_peak_force_n": self.largest_peak_n,
         }
         if self.expert_trials is not None:
             out.update(
@@ -127,6 +139,7 @@ class StiffnessFifth:
                     "expert_success": _share(self.expert_successes, self.expert_trials),
                     "expert_force_limit_stall_episodes": self.expert_force_limit_stall_episodes,
                     "expert_force_limit_stall": _share(self.expert_force_limit_stall_episodes, self.expert_trials),
+                    "expert_largest_peak_force_n": self.expert_largest_peak_n,
                 }
             )
         return out
@@ -159,6 +172,7 @@ def by_stiffness_fifth(
             stopped_by=dict(
                 sorted(Counter(reason for _, _, r in members if (reason := stop_reason(r)) is not None).items())
             ),
+            largest_peak_n=_largest_peak([r for _, _, r in members]),
         )
         if expert is not None:
             beside = [expert[index] for _, index, _ in members if index in expert]
@@ -167,6 +181,7 @@ def by_stiffness_fifth(
                 expert_trials=len(beside),
                 expert_successes=sum(bool(r.get("success")) for r in beside),
                 expert_force_limit_stall_episodes=sum(_stalled(r) for r in beside),
+                expert_largest_peak_n=_largest_peak(beside),
             )
         fifths.append(fifth)
     return fifths

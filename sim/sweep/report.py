@@ -184,6 +184,11 @@ DEFINITIONS = (
 )
 
 
+def _newtons(value: float | None) -> str:
+    """A force for a table cell [N] ("-": none recorded)."""
+    return "-" if value is None else f"{value:.2f} N"
+
+
 def _stiffness_section(page: Page, fifths: Sequence[StiffnessFifth], expert: bool) -> None:
     """The table of success and force-limit stops by fifth of the drawn stiffness (the expert's beside)."""
     page.heading("Where the force limit stops a retraction, by fifth of the drawn stiffness")
@@ -193,11 +198,13 @@ def _stiffness_section(page: Page, fifths: Sequence[StiffnessFifth], expert: boo
         f"at most one{beside if expert else ''}. The last column names what ended the policy's unsuccessful "
         "episodes (failure classes, see Terms); the force limit's by what its bound was on: the travel bound (the "
         "grasp point's travel since the grasp times the stiffest tissue's stiffness, where the force sensing cannot "
-        "tell the limit: a bound, not a measured force) or the measured force."
+        "tell the limit: a bound, not a measured force) or the measured force. The largest peak is the true "
+        "retraction force's (the simulation's, whatever the sensing): with exact sensing, what retracting tissue of "
+        "that stiffness took."
     )
-    header = ["Young's modulus", "trials", "success", "stopped by the force limit"]
+    header = ["Young's modulus", "trials", "success", "stopped by the force limit", "largest true peak"]
     if expert:
-        header += ["expert success", "expert stopped by the force limit"]
+        header += ["expert success", "expert stopped by the force limit", "expert largest true peak"]
     header.append("what ended the policy's unsuccessful episodes")
     rows = []
     for f in fifths:
@@ -207,9 +214,14 @@ def _stiffness_section(page: Page, fifths: Sequence[StiffnessFifth], expert: boo
             f"{f.trials} (thin)" if f.thin else str(f.trials),
             percent(data["success"]),
             percent(data["force_limit_stall"]),
+            _newtons(f.largest_peak_n),
         ]
         if expert:
-            row += [percent(data["expert_success"]), percent(data["expert_force_limit_stall"])]
+            row += [
+                percent(data["expert_success"]),
+                percent(data["expert_force_limit_stall"]),
+                _newtons(f.expert_largest_peak_n),
+            ]
         row.append(_counts(f.stopped_by) if f.stopped_by else "none")
         rows.append(row)
     page.table(header, rows)

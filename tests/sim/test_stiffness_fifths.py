@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 from typing import Any
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -78,3 +79,23 @@ def test_the_experts_overall_success_has_its_wilson_interval() -> None:
     assert summary["expert_success"] == 0.9 and summary["expert_errors"] == 1
     assert summary["expert_force_limit_stall"] == 0.1
     assert summary["expert_ci95"][0] < 0.9 < summary["expert_ci95"][1] < 1.0
+
+
+def test_each_fifth_names_the_largest_true_peak_force_of_its_trials() -> None:
+    """The policy's and the expert's largest true peak retraction force per fifth: what retracting that stiffness
+    took; none where no episode recorded one."""
+    records = [{"index": k, STIFFNESS_KEY: float(k), "success": True, "peak_force_n": 0.1 * k} for k in range(10)]
+    expert = [{"index": k, STIFFNESS_KEY: float(k), "success": True, "peak_force_n": 0.2 * (9 - k)} for k in range(10)]
+    fifths = by_stiffness_fifth(records, expert)
+    assert [f.largest_peak_n for f in fifths] == pytest.approx([0.1, 0.3, 0.5, 0.7, 0.9])
+    assert [f.to_dict()["expert_largest_peak_force_n"] for f in fifths] == [
+        1.8,
+        1.4000000000000001,
+        1.0,
+        0.6000000000000001,
+        0.2,
+    ]
+    assert (
+        by_stiffness_fifth([{"index": 0, STIFFNESS_KEY: 1.0, "success": True}])[0].to_dict()["largest_peak_force_n"]
+        is None
+    )

@@ -180,6 +180,8 @@ def test_beside_expert_shows_the_expert_on_the_same_trials_by_fifth_of_stiffness
     assert [f["trials"] for f in fifths] == [1] * 5 and all(f["thin"] for f in fifths)
     assert sum(f["expert_trials"] for f in fifths) == 5
     assert [f["expert_success"] for f in fifths] == [f["success"] for f in scripted["by_stiffness_fifth"]]
+    peaks = [f["largest_peak_force_n"] for f in scripted["by_stiffness_fifth"]]
+    assert [f["expert_largest_peak_force_n"] for f in fifths] == peaks and all(p > 0 for p in peaks)
     assert all(a["stiffness_high_kpa"] <= b["stiffness_low_kpa"] for a, b in itertools.pairwise(fifths))
     assert {f["stiffness_low_kpa"] for f in fifths} == {
         r["options"]["tissue_youngs_modulus_kpa"]  # type: ignore[index]
@@ -187,6 +189,9 @@ def test_beside_expert_shows_the_expert_on_the_same_trials_by_fifth_of_stiffness
     }
     report = (beside_out / "report.md").read_text()
     assert "## Where the force limit stops a retraction, by fifth of the drawn stiffness" in report
-    header = "| Young's modulus | trials | success | stopped by the force limit | expert success |"
+    header = (
+        "| Young's modulus | trials | success | stopped by the force limit | largest true peak | expert success | "
+        "expert stopped by the force limit | expert largest true peak |"
+    )
     assert header in report and " kPa | 1 (thin) | " in report, report
     assert "expert success" not in (scripted_out / "report.md").read_text()
