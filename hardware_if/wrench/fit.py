@@ -227,11 +227,15 @@ class FreeSpaceError:
 
     def retraction_max_n(self) -> float:
         """The largest calibrated error (accelerations from the log) at retraction speeds, within the covered
-        accelerations [N]; a log with no such sample: within the covered accelerations at any speed, else all."""
-        for inside in (self.in_retraction_regime, self.within_covered_acceleration):
-            if np.any(inside):
-                return float(self.after_n[inside].max())
-        return float(self.after_n.max())
+        accelerations [N]; a log with no such sample: :meth:`covered_max_n`."""
+        inside = self.in_retraction_regime
+        return float(self.after_n[inside].max()) if np.any(inside) else self.covered_max_n()
+
+    def covered_max_n(self) -> float:
+        """The largest calibrated error within the covered accelerations at any speed [N]; a log with no such
+        sample: the largest of all."""
+        inside = self.within_covered_acceleration
+        return float(self.after_n[inside].max()) if np.any(inside) else float(self.after_n.max())
 
     @property
     def in_retraction_regime(self) -> np.ndarray:
@@ -584,9 +588,7 @@ def fit_calibration(
     values = parameters[columns]
     slow = error.retraction_max_n()
     shown_slow = int(np.count_nonzero(error.in_retraction_regime))
-    covered = error.within_covered_acceleration
-    anywhere = float(error.after_n[covered].max()) if np.any(covered) else float(error.after_n.max())
-    basis = slow if shown_slow >= MIN_REGIME_SAMPLES else max(slow, anywhere)
+    basis = slow if shown_slow >= MIN_REGIME_SAMPLES else max(slow, error.covered_max_n())
     with_acceleration = max(BOUND_MARGIN * basis, MIN_BOUND_N)
     inside, live, _ = error.regimes()["error_bound_n"]
     shown = [float(error.after_n.max()), with_acceleration] + ([float(live[inside].max())] if np.any(inside) else [])
