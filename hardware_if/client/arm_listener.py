@@ -85,6 +85,7 @@ class ArmListener(Node):
         self._setpoint_jaw: float | None = None
         self._force_body_n = np.zeros(3)
         self._calibration: WrenchCalibration | None = None
+        self._force_sensor = False
         self._calibration_configuration = PsmModel().configuration()
         # The acceleration of the last command sent (the chain's), given to the calibration: the arm tracks it,
         # and a single measured_js carries none.
@@ -262,9 +263,18 @@ class ArmListener(Node):
 
     @property
     def force_sensing(self) -> str:
-        """What the force comes from, as the simulation's presets name it: ``dvrk-calibrated`` or ``dvrk``."""
+        """What the force comes from, as the simulation's presets name it: ``dvrk-calibrated``, ``dvrk``, or ``ideal``
+        for a force sensor at the instrument (the sensing whose shipped policies it takes)."""
         with self._lock:
+            if self._force_sensor:
+                return "ideal"
             return "dvrk" if self._calibration is None else "dvrk-calibrated"
+
+    def declare_force_sensor(self, declared: bool) -> None:
+        """``measured_cf`` comes from a force sensor at the instrument (the console's force source set to it), as
+        the user declared: the policy then takes the force as exact sensing's policies do."""
+        with self._lock:
+            self._force_sensor = declared
 
     def set_wrench_calibration(self, calibration: WrenchCalibration | None) -> None:
         """Take the force from ``measured_js`` efforts with a calibration's model removed, not ``measured_cf``."""

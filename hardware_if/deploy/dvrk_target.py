@@ -59,7 +59,11 @@ def deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder
     config = with_sensing(config, error_n, DEFAULT_RANGES, tissue_known=False)
     # Said before anything reaches the arm: a limit the robot's force sensing cannot tell.
     warn_sensing(
-        config, options.force_sensing_source, recorder, echo, calibrated=options.wrench_calibration is not None
+        config,
+        options.force_sensing_source,
+        recorder,
+        echo,
+        calibrated=options.wrench_calibration is not None or options.force_sensor,
     )
     configured = "the default" if options.safety_config is None else "from the safety configuration"
     echo(
@@ -76,6 +80,7 @@ def deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder
             node_name=f"{options.arm.lower()}_deploy_{os.getpid()}",
         )
         client.set_wrench_calibration(options.wrench_calibration)
+        client.declare_force_sensor(options.force_sensor)
         client.start()
         listener: Any  # TaskListener, RegisteredSite or CameraSite: the task source interface
         if options.perception is not None:

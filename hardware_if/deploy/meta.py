@@ -48,7 +48,13 @@ def sensing_meta(options: DeployOptions) -> dict[str, Any]:
         error_n = error_bound_n(sensing_params(name), config)
         source = f"{name} force sensing (simulated)"
     else:
-        name = "dvrk" if options.wrench_calibration is None else "dvrk-calibrated"
+        name = (
+            "force-sensor"
+            if options.force_sensor
+            else "dvrk"
+            if options.wrench_calibration is None
+            else "dvrk-calibrated"
+        )
         given = options.force_sensing_error_n  # what deploy_dvrk gives the chain
         error_n = error_bound_n(sensing_params("dvrk")) if given is None else given
         source = options.force_sensing_source

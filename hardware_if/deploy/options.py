@@ -47,6 +47,8 @@ class DeployOptions:
             bound for the console's uncompensated ``measured_cf``.
         force_sensing_source: What that bound is from, for the run-start warning (dVRK).
         wrench_calibration: The force-sensing calibration to take the force with (dVRK); None: ``measured_cf``.
+        force_sensor: ``measured_cf`` comes from a force sensor at the instrument (dVRK), off by at most
+            ``force_sensing_error_n`` as the user declared (``deploy --force-sensor``), not from motor currents.
         wrench_calibration_path: The file ``wrench_calibration`` was read from, for the recording.
         wrench_calibration_sha256: That file's SHA-256 (hex) as it was read, for the recording.
         perception: ``camera[:MODEL]``: the site from the endoscope's images (:mod:`hardware_if.client.perceived_env`).
@@ -76,6 +78,7 @@ class DeployOptions:
     force_sensing_error_n: float | None = None
     force_sensing_source: str = "dvrk measured_cf, uncompensated"
     wrench_calibration: WrenchCalibration | None = None
+    force_sensor: bool = False
     wrench_calibration_path: Path | None = None
     wrench_calibration_sha256: str | None = None
     perception: str | None = None

@@ -201,11 +201,15 @@ def test_a_stopped_calibration_exits_128_plus_the_signal_with_one_plain_line(
 
 
 @pytest.mark.slow
-def test_an_exact_console_is_refused_live_and_offline(ros_env: dict[str, str], tmp_path: Path) -> None:
-    """Against sim-dvrk --wrench ideal (every joint effort 0 in free space), calibrate-wrench exits 1 saying the
-    console reports the exact force and needs no calibration, and writes none; the bag it recorded, fitted
-    offline, is refused the same way."""
-    process = start_sim_dvrk(ros_env, "--wrench", "ideal")
+def test_an_exact_console_is_refused_live_and_offline_and_deploys_as_a_force_sensor(
+    ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    """Against sim-dvrk --wrench ideal (every joint effort 0 in free space, a force sensor's measured_cf),
+    calibrate-wrench exits 1 saying the console reports the exact force and needs no calibration, names
+    --force-sensor, and writes none; the bag it recorded, fitted offline, is refused the same way. The deploy
+    that message names finishes the retraction on that console: the filter trusts the force to the declared
+    bound, --policy pretrained takes the exact-sensing policy, and the recording names the sensing."""
+    process = start_sim_dvrk(ros_env, "--wrench", "ideal", "--task", "lift")
     try:
         rclpy.init()
         try:
@@ -225,11 +229,33 @@ def test_an_exact_console_is_refused_live_and_offline(ros_env: dict[str, str], t
             timeout=300,
             check=False,
         )
+        recording, config = tmp_path / "sensor.mcap", tmp_path / "safety.toml"
+        config.write_text("deadman_timeout_s = 0.5\n")  # as the other deploys here: a loaded machine lags
+        deploy = [sys.executable, "-m", "tissue_retract", "deploy", "--policy", "pretrained", "--target", "dvrk"]
+        deploy += ["--task", "lift", "--domain-id", ros_env["ROS_DOMAIN_ID"], "--force-sensor", "0.2"]
+        deploy += ["--safety-config", str(config), "--policy-budget", "600"]
+        deployed = subprocess.run(
+            [*deploy, "--wait", "60", "--record", str(recording)],
+            env=ros_env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
     finally:
         stop(process)
     output = live.stdout + live.stderr
     assert live.returncode == 1 and not out.exists(), output
     assert "reports the exact force" in live.stderr and "needs no calibration" in live.stderr, output
+    assert "deploy with --force-sensor N" in live.stderr, output
+    said = deployed.stdout + deployed.stderr
+    assert deployed.returncode == 0 and "success: 100 % (1 of 1)" in deployed.stdout, said
+    assert "the filter trusts the force to 0.2 N (--force-sensor" in deployed.stdout, said
+    assert "policy: the shipped one trained on ideal force sensing" in deployed.stdout, said
+    assert "WARNING" not in said and "never exceeded beyond the force sensing's 0.20 N error bound" in said, said
+    meta = load_recording(recording).meta
+    assert meta["sensing"]["force_sensing"] == "force-sensor", meta
+    assert meta["sensing"]["force_sensing_error_n"] == 0.2, meta
     assert "Traceback" not in output
     offline = subprocess.run(
         [sys.executable, "-m", "tissue_retract", "calibrate-wrench", "--from", str(bag), "--out", str(out)],

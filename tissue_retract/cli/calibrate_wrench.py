@@ -469,8 +469,8 @@ def _live(args: argparse.Namespace, output: Path, space: Any) -> int:
                 print(
                     f"tissue-retract calibrate-wrench: error: {args.arm}'s console reported every joint effort as 0 "
                     "in free space: it reports the exact force (as sim-dvrk --wrench ideal does) or sends no "
-                    "efforts. An exact console needs no calibration: deploy without --wrench-calibration; no "
-                    "calibration written",
+                    "efforts. An exact console needs no calibration: deploy with --force-sensor N, N the force "
+                    "sensor's error bound [N], not --wrench-calibration; no calibration written",
                     file=sys.stderr,
                 )
                 return 1

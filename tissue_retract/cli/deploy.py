@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import math
 import sys
 import time
 from pathlib import Path
@@ -116,6 +117,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="dvrk only: the force-sensing calibration calibrate-wrench wrote; the safety filter trusts the force "
         "to its held-out error (default: the console's uncompensated measured_cf, to its model's error bound)",
+    )
+    parser.add_argument(
+        "--force-sensor",
+        metavar="NEWTONS",
+        type=float,
+        default=None,
+        help="dvrk only, not with --wrench-calibration: the console's measured_cf comes from a force sensor at the "
+        "instrument (its force source set to it), off by at most NEWTONS; the safety filter trusts the force to that "
+        "and --policy pretrained takes the policy shipped for exact sensing",
     )
     source = parser.add_mutually_exclusive_group()
     point_argument(
@@ -203,7 +213,20 @@ def run(args: argparse.Namespace) -> int:
             )
     elif args.wrench_calibration is not None:
         raise ConfigurationError("--wrench-calibration", args.wrench_calibration, "dvrk only")
+    elif args.force_sensor is not None:
+        raise ConfigurationError("--force-sensor", args.force_sensor, "dvrk only: the simulation's is --force-sensing")
     sensing_error_n, sensing_source, calibration = None, "dvrk measured_cf, uncompensated", None
+    if args.force_sensor is not None:
+        if args.wrench_calibration is not None:
+            raise ConfigurationError(
+                "--force-sensor", args.force_sensor, "either a force sensor or --wrench-calibration, not both"
+            )
+        if not (math.isfinite(args.force_sensor) and args.force_sensor > 0.0):
+            why = "the sensor's error bound, a finite number of newtons > 0 (no sensor is exact)"
+            raise ConfigurationError("--force-sensor", args.force_sensor, why)
+        sensing_error_n = args.force_sensor
+        sensing_source = f"a force sensor on measured_cf, off by at most {args.force_sensor:g} N as declared"
+
     calibration_path, calibration_sha256 = None, None
     if args.wrench_calibration is not None:
         # Refused here, before the recording is opened: another arm's, a bound its own fit contradicts, one
@@ -217,7 +240,7 @@ def run(args: argparse.Namespace) -> int:
         sensing_source = (
             f"dvrk measured_js efforts, calibrated by {args.wrench_calibration} (fitted on {calibration.origin})"
         )
-    elif args.target == "dvrk":
+    elif args.target == "dvrk" and args.force_sensor is None:
         sensing_error_n = error_bound_n(sensing_params("dvrk"))
 
     safety_config = None
@@ -261,6 +284,7 @@ def run(args: argparse.Namespace) -> int:
         force_sensing_error_n=sensing_error_n,
         force_sensing_source=sensing_source,
         wrench_calibration=calibration,
+        force_sensor=args.force_sensor is not None,
         wrench_calibration_path=calibration_path,
         wrench_calibration_sha256=calibration_sha256,
         perception=args.perception,
@@ -276,6 +300,8 @@ def run(args: argparse.Namespace) -> int:
             f"and the bound holds while the arm tracks it, with {calibration.regime_words()}; beyond them, to "
             f"its error_bound_n {calibration.error_bound_n:.3g} N"
             if calibration is not None
+            else "--force-sensor: the promise holds while the sensor's error stays within it"
+            if args.force_sensor is not None
             else "the dvrk sensing model's error bound: a real PSM's identified free-space efforts at the chain's "
             "acceleration limits, mostly the arm's inertia; the force limit is kept from the travel: on a robot, "
             "calibrate-wrench first"
