@@ -200,6 +200,24 @@ def _cases(tmp: Path) -> list[Case]:
             ("--seed", "-1", "[0,"),
             (tmp / "o1",),
         ),
+        *(
+            Case(
+                f"deploy-force-sensor-{name}",
+                ("deploy", "--policy", "scripted", *argv, "--record", str(tmp / f"fs-{name}" / "r.mcap")),
+                expect,
+                (tmp / f"fs-{name}",),
+            )
+            for name, argv, expect in (
+                ("zero", ("--target", "dvrk", "--force-sensor", "0"), ("--force-sensor", "error bound", "> 0")),
+                ("nan", ("--target", "dvrk", "--force-sensor", "nan"), ("--force-sensor", "nan", "finite")),
+                ("in-sim", ("--target", "sim", "--force-sensor", "0.2"), ("--force-sensor", "dvrk only")),
+                (
+                    "with-calibration",
+                    ("--target", "dvrk", "--force-sensor", "0.2", "--wrench-calibration", str(tmp / "w.json")),
+                    ("--force-sensor", "not both"),
+                ),
+            )
+        ),
         Case(
             "deploy-rate-zero",
             (

@@ -112,6 +112,20 @@ class DeployOptions:
             raise ConfigurationError("policy_budget_s", self.policy_budget_s, "a finite number of seconds > 0")
         if self.target not in ("sim", "dvrk"):
             raise ConfigurationError("target", self.target, "'sim' or 'dvrk'")
+        error_n = self.force_sensing_error_n
+        if error_n is not None and not (np.isfinite(error_n) and error_n > 0.0):
+            # The filter would take a dVRK's force as exact: no sensor is, and a 0 N bound turns the margin off.
+            raise ConfigurationError(
+                "force_sensing_error_n",
+                error_n,
+                "a sensing error bound, a finite number of newtons > 0 (no sensing is exact)",
+            )
+        if self.force_sensor and (self.target != "dvrk" or self.wrench_calibration is not None or error_n is None):
+            raise ConfigurationError(
+                "force_sensor",
+                self.force_sensor,
+                "--force-sensor N on --target dvrk, with the sensor's error bound and without --wrench-calibration",
+            )
         if self.dry_run and self.target != "dvrk":
             raise ConfigurationError("dry_run", self.dry_run, "--dry-run with --target dvrk (live robot state)")
         if self.episodes < 1:

@@ -36,8 +36,8 @@ def test_beyond_the_regime_a_held_tissue_is_bounded_by_its_travel() -> None:
     bound = _bound()
     grasp = np.zeros(3)
     bound.update(0.0, grasp, np.zeros(3), 50.0, 0.5 * COVERED)  # the jaws close: the grasp
-    inside = bound.update(0.0, grasp + [0.0, 0.0, 0.02], np.array([0.2, 0.0, 0.0]), 50.0, 0.5 * COVERED)
-    beyond = bound.update(0.0, grasp + [0.0, 0.0, 0.02], np.array([0.2, 0.0, 0.0]), 50.0, 2.0 * COVERED)
+    inside = bound.update(0.0, grasp + np.array([0.0, 0.0, 0.02]), np.array([0.2, 0.0, 0.0]), 50.0, 0.5 * COVERED)
+    beyond = bound.update(0.0, grasp + np.array([0.0, 0.0, 0.02]), np.array([0.2, 0.0, 0.0]), 50.0, 2.0 * COVERED)
     assert inside.source == "measured" and beyond.source == "travel"
 
 

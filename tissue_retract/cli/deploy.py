@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import math
 import sys
 import time
 from pathlib import Path
@@ -63,7 +62,7 @@ from hardware_if.deploy.options import DeployOptions
 from hardware_if.wrench.calibration import read_calibration
 from policies.resolve import POLICY_NAMES, names_a_checkpoint
 from psm_control.errors import ConfigurationError
-from psm_control.inputs import check_output_path
+from psm_control.inputs import check_output_path, given_as
 from safety.config import MAX_CONTROL_RATE_HZ, MIN_CONTROL_RATE_HZ, load_safety_config
 from sim.force_sensing import error_bound_n, sensing_params
 from tissue_retract.cli._camera import (
@@ -221,10 +220,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigurationError(
                 "--force-sensor", args.force_sensor, "either a force sensor or --wrench-calibration, not both"
             )
-        if not (math.isfinite(args.force_sensor) and args.force_sensor > 0.0):
-            why = "the sensor's error bound, a finite number of newtons > 0 (no sensor is exact)"
-            raise ConfigurationError("--force-sensor", args.force_sensor, why)
-        sensing_error_n = args.force_sensor
+        sensing_error_n = args.force_sensor  # its bound is checked with the options (DeployOptions)
         sensing_source = f"a force sensor on measured_cf, off by at most {args.force_sensor:g} N as declared"
 
     calibration_path, calibration_sha256 = None, None
@@ -253,44 +249,47 @@ def run(args: argparse.Namespace) -> int:
 
         load_checkpoint(args.policy)
     record = Path(args.record) if args.record else _default_record()
+    site = args.site
+    if args.registration is not None:
+        site = read_registration(args.registration, args.arm)
+    # A sensing error bound the options refuse can only be --force-sensor's: a calibration's is checked as it is read.
+    with given_as("--force-sensor", "force_sensing_error_n"):
+        options = DeployOptions(
+            policy=args.policy,
+            target=args.target,
+            record=record,
+            task=args.task,
+            arm=args.arm,
+            rate_hz=args.rate,
+            dry_run=args.dry_run,
+            safety_config=safety_config,
+            episodes=args.episodes,
+            seed=args.seed,
+            wait_s=args.wait,
+            policy_budget_s=args.policy_budget,
+            live=args.live,
+            site=None if site is None else tuple(site),
+            goal=None if args.goal is None else tuple(args.goal),
+            camera_site=args.camera_site,
+            force_sensing=args.force_sensing,
+            force_sensing_error_n=sensing_error_n,
+            force_sensing_source=sensing_source,
+            wrench_calibration=calibration,
+            force_sensor=args.force_sensor is not None,
+            wrench_calibration_path=calibration_path,
+            wrench_calibration_sha256=calibration_sha256,
+            perception=args.perception,
+            image_timeout_s=args.image_timeout,
+            endoscope_rig=args.endoscope_rig,
+            texture=check_texture(args.texture) if args.texture is not None else None,
+        )
+    # After every input the options check: the record's folder is made here, and a refused input leaves none.
     inputs = (args.policy, args.safety_config, args.wrench_calibration, args.registration, args.texture)
     check_output_path(
         record,
         "--record",
         inputs,
         existing=None if args.force else "a new file: an earlier recording is kept unless --force replaces it",
-    )
-    site = args.site
-    if args.registration is not None:
-        site = read_registration(args.registration, args.arm)
-    options = DeployOptions(
-        policy=args.policy,
-        target=args.target,
-        record=record,
-        task=args.task,
-        arm=args.arm,
-        rate_hz=args.rate,
-        dry_run=args.dry_run,
-        safety_config=safety_config,
-        episodes=args.episodes,
-        seed=args.seed,
-        wait_s=args.wait,
-        policy_budget_s=args.policy_budget,
-        live=args.live,
-        site=None if site is None else tuple(site),
-        goal=None if args.goal is None else tuple(args.goal),
-        camera_site=args.camera_site,
-        force_sensing=args.force_sensing,
-        force_sensing_error_n=sensing_error_n,
-        force_sensing_source=sensing_source,
-        wrench_calibration=calibration,
-        force_sensor=args.force_sensor is not None,
-        wrench_calibration_path=calibration_path,
-        wrench_calibration_sha256=calibration_sha256,
-        perception=args.perception,
-        image_timeout_s=args.image_timeout,
-        endoscope_rig=args.endoscope_rig,
-        texture=check_texture(args.texture) if args.texture is not None else None,
     )
     # Refused here, before anything connects, if it is not a model.
     announce(texture_warning(load_perception(args.perception), options.texture))

@@ -12,6 +12,7 @@ from hardware_if.deploy.options import DeployOptions
 from hardware_if.deploy.run import deploy
 from hardware_if.recording.replay import load_recording, summarize_recording
 from hardware_if.wrench.calibration import WrenchCalibration
+from psm_control.errors import ConfigurationError
 from sim.force_sensing import error_bound_n, sensing_params
 
 
@@ -63,3 +64,24 @@ def test_a_calibrated_dvrk_deploy_names_the_calibration_file_and_its_bounds(tmp_
         "source": "dvrk measured_cf, uncompensated",
         "wrench_calibration": None,
     }
+
+
+def test_a_force_sensor_deploy_names_it_and_its_bound_is_checked_with_the_options(tmp_path: Path) -> None:
+    """deploy --force-sensor: the meta says force-sensor with the declared bound; the options refuse a sensor
+    without a finite bound > 0, on the simulation, or beside a calibration, whoever builds them."""
+    common = {"policy": "scripted", "record": tmp_path / "run.mcap"}
+    options = DeployOptions(target="dvrk", force_sensing_error_n=0.2, force_sensor=True, **common)
+    sensing = recording_meta(options)["sensing"]
+    assert (sensing["force_sensing"], sensing["force_sensing_error_n"]) == ("force-sensor", 0.2)
+    calibration = WrenchCalibration("PSM1", (0,), (0.5,), 4.0, 2.5, 3.0, 9.0, 0.8, 1.9, 1000)
+    for field, extra in (
+        ("force_sensing_error_n", {"target": "dvrk", "force_sensing_error_n": 0.0, "force_sensor": True}),
+        ("force_sensing_error_n", {"target": "dvrk", "force_sensing_error_n": float("nan")}),
+        ("force_sensor", {"target": "dvrk", "force_sensor": True}),
+        ("force_sensor", {"target": "sim", "force_sensing_error_n": 0.2, "force_sensor": True}),
+        ("force_sensor", {"target": "dvrk", "force_sensing_error_n": 0.2, "force_sensor": True,
+                          "wrench_calibration": calibration}),
+    ):  # fmt: skip
+        with pytest.raises(ConfigurationError) as refused:
+            DeployOptions(**common, **extra)
+        assert refused.value.field == field, (extra, refused.value)
