@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Self
 
@@ -47,6 +48,8 @@ CALIBRATED_FORCE_MAX_N = 1e4
 CLOCK_SLACK_S = 0.05
 #: The state topic's history (sent at once to a late subscriber) is over when no state came for this [s].
 STATE_HISTORY_QUIET_S = 0.25
+#: How many of the last measurements a new stamp is judged against (``stamp_step_fault``'s ``ahead_s``).
+STAMP_OFFSETS_KEPT = 100
 
 
 class ArmListener(Node):
@@ -79,6 +82,10 @@ class ArmListener(Node):
         self._measured: JointState | None = None
         self._measured_rx_s: float | None = None  # when the latest measured_js with a new stamp arrived
         self._repeated_rx_s: float | None = None  # when that measurement last arrived again, stamp unchanged
+        # Stamp less arrival of the measurements last taken: the largest is the least delayed, which a new stamp
+        # may not run ahead of by more than STAMP_JUMP_S. They are the last taken, not the last second's: a
+        # stall of this process, however long, leaves the ones before it to judge by.
+        self._stamp_offsets_s: deque[float] = deque(maxlen=STAMP_OFFSETS_KEPT)
         self._setpoint_q: np.ndarray | None = None
         self._jaw = 0.0
         self._jaw_velocity = 0.0
@@ -174,11 +181,11 @@ class ArmListener(Node):
                 if (stamp.sec, stamp.nanosec) == (last.sec, last.nanosec):
                     self._repeated_rx_s = rx_s  # the same measurement again: it stays as old as it was
                     return
+                offset_s = convert.time_to_seconds(stamp) - rx_s
                 fault = stamp_step_fault(
                     convert.time_to_seconds(last),
-                    self._measured_rx_s,
                     convert.time_to_seconds(stamp),
-                    rx_s,
+                    offset_s - max(self._stamp_offsets_s),
                     STAMP_JUMP_S,
                 )
                 if fault:
@@ -186,6 +193,7 @@ class ArmListener(Node):
                     return
             self._measured = message
             self._measured_rx_s = rx_s
+            self._stamp_offsets_s.append(convert.time_to_seconds(message.header.stamp) - rx_s)
             self._repeated_rx_s = None
             self._lock.notify_all()
 

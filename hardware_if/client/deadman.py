@@ -28,24 +28,22 @@ from safety.config import SafetyConfig
 
 __all__ = ["STAMP_JUMP_S", "ArmFacts", "Deadman", "DeadmanStatus", "stamp_step_fault"]
 
-#: How far a ``measured_js`` stamp may advance beyond the time between its arrival and the previous one's [s].
-#: The excess is how much longer the previous message was under way than this one: about 0.12 s at the most
-#: under load (the largest age of a measurement at a tick seen on a busy machine, docs/dvrk.md), so 1 s
-#: (a hundred of the dVRK's 100 Hz periods) is a clock that jumped, never a late message.
+#: How far a ``measured_js`` stamp may run further ahead of its arrival than the measurements before it did [s].
+#: A message under way longer, or a callback this process ran late, only makes a stamp look older than the
+#: arrivals, never newer; the next message's stamp is then judged against the least delayed of the ones before
+#: it (:func:`stamp_step_fault`). 1 s, a hundred of the dVRK's 100 Hz periods, is a clock that jumped.
 STAMP_JUMP_S = 1.0
 
 
-def stamp_step_fault(
-    previous_stamp_s: float, previous_rx_s: float, stamp_s: float, rx_s: float, jump_s: float = STAMP_JUMP_S
-) -> str:
+def stamp_step_fault(previous_stamp_s: float, stamp_s: float, ahead_s: float, jump_s: float = STAMP_JUMP_S) -> str:
     """What is wrong with a ``measured_js`` stamp after the previous one, or "" when it may follow it.
 
     Args:
         previous_stamp_s: The previous measurement's stamp (the console's clock) [s].
-        previous_rx_s: When it first arrived (this machine's monotonic clock) [s].
         stamp_s: This measurement's stamp [s].
-        rx_s: When it arrived [s].
-        jump_s: Largest advance of the stamp beyond the time between the arrivals [s].
+        ahead_s: How much further this stamp runs ahead of its arrival (stamp less arrival time, this machine's
+            clock) than the least delayed of the measurements before it did [s].
+        jump_s: Largest allowed ``ahead_s`` [s].
 
     Returns:
         "" for a stamp that advanced no further than the arrivals allow, or one equal to the previous (a
@@ -55,11 +53,10 @@ def stamp_step_fault(
     step = stamp_s - previous_stamp_s
     if step < 0.0:
         return f"stamp went back {-step:.3g} s (each measurement is stamped later than the one before)"
-    between = rx_s - previous_rx_s
-    if step - between > jump_s:
+    if ahead_s > jump_s:
         return (
-            f"stamp jumped {step:.4g} s ahead in {between:.3g} s between arrivals "
-            f"(at most {jump_s:g} s more than the time between arrivals)"
+            f"stamp jumped {ahead_s:.4g} s further ahead of its arrival than the measurements before it "
+            f"(at most {jump_s:g} s)"
         )
     return ""
 
