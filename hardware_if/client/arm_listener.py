@@ -174,6 +174,7 @@ class ArmListener(Node):
         if self._joints(message, "measured_js") is None:
             return  # never used: the deadman holds on the latched fault
         rx_s = time.monotonic()
+        stamp_s = convert.time_to_seconds(message.header.stamp)
         with self._lock:
             previous = self._measured
             if previous is not None and self._measured_rx_s is not None:
@@ -181,19 +182,14 @@ class ArmListener(Node):
                 if (stamp.sec, stamp.nanosec) == (last.sec, last.nanosec):
                     self._repeated_rx_s = rx_s  # the same measurement again: it stays as old as it was
                     return
-                offset_s = convert.time_to_seconds(stamp) - rx_s
-                fault = stamp_step_fault(
-                    convert.time_to_seconds(last),
-                    convert.time_to_seconds(stamp),
-                    offset_s - max(self._stamp_offsets_s),
-                    STAMP_JUMP_S,
-                )
+                ahead_s = (stamp_s - rx_s) - max(self._stamp_offsets_s)
+                fault = stamp_step_fault(convert.time_to_seconds(last), stamp_s, ahead_s, STAMP_JUMP_S)
                 if fault:
                     self._invalid("measured_js", fault)
                     return
             self._measured = message
             self._measured_rx_s = rx_s
-            self._stamp_offsets_s.append(convert.time_to_seconds(message.header.stamp) - rx_s)
+            self._stamp_offsets_s.append(stamp_s - rx_s)
             self._repeated_rx_s = None
             self._lock.notify_all()
 

@@ -56,9 +56,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         for index, fault in enumerate(faults):
             # The shared console has the first domain; each fault on a console of its own the next one.
-            domain = base if fault.shares_console else 1 + (base + index) % 100
+            console = shared if fault.shares_console else None
+            domain = base if console is not None else 1 + (base + index) % 100
             started = time.monotonic()
-            result = run_fault(fault, root / f"{index:02d}", domain, console=shared if fault.shares_console else None)
+            result = run_fault(fault, root / f"{index:02d}", domain, console=console)
             elapsed = time.monotonic() - started
             hold = result.hold.removeprefix("HOLD: ") or "-"
             ok = "yes" if result.ok else "NO"
