@@ -229,11 +229,3 @@ class Randomizer:
             _check_limits(name, value)
             values[name] = value
         return values
-
-    def extremes(self, rng: np.random.Generator) -> dict[str, float]:
-        """Every parameter at its low or high end, chosen at random (for robustness tests)."""
-        dynamics = self.dynamics_stream(rng)
-        return {
-            name: float(bounds[int((dynamics if name in DYNAMICS_PARAMETERS else rng).integers(2))])
-            for name, bounds in self.ranges.items()
-        }
