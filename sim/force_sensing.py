@@ -126,7 +126,17 @@ def sensing_params(name: str) -> SensingParams:
 
 def console_force(jacobian: np.ndarray, efforts: np.ndarray) -> np.ndarray:
     """The force part of the console's ``pinv(J^T) tau`` (3,) [N]."""
-    return np.asarray(np.linalg.pinv(jacobian.T, rcond=_PINV_RCOND)[:3] @ efforts)
+    jacobian = np.ascontiguousarray(jacobian, dtype=float)
+    return np.asarray(_force_rows(jacobian.tobytes(), jacobian.shape) @ efforts)
+
+
+@functools.lru_cache(maxsize=8)
+def _force_rows(jacobian: bytes, shape: tuple[int, ...]) -> np.ndarray:
+    """The force rows of ``pinv(J^T)`` for a Jacobian given by its bytes (read-only). Kept for the last few: an
+    arm at rest keeps its Jacobian tick after tick, and this SVD was a third of an idle console's tick."""
+    rows = np.linalg.pinv(np.frombuffer(jacobian).reshape(shape).T, rcond=_PINV_RCOND)[:3]
+    rows.flags.writeable = False
+    return rows
 
 
 class ColouredNoise:
@@ -198,6 +208,8 @@ class ForceSensor:
         self._arm = arm
         rng = rng if rng is not None else np.random.default_rng(0)
         self.residual = ArmResidual(arm if params.residual else None, params.scale, rng)  # draws the first episode's
+        self._arm_state: tuple[bytes, ...] = ()
+        self._arm_efforts = np.zeros(6)
         self._at_rest()
 
     def reset(self, rng: np.random.Generator) -> None:
@@ -213,12 +225,17 @@ class ForceSensor:
 
     def arm_efforts(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, commanded_qdd: np.ndarray) -> np.ndarray:
         """The identified arm's part of the efforts (6,): all of it, or the inertia of the tracking error
-        (``arm_terms``)."""
+        (``arm_terms``). The last state's are kept: an arm at rest asks for them again tick after tick."""
         if self._arm is None:
             return np.zeros(6)
-        if self.params.arm_terms == "tracking":
-            return self.params.scale * self._arm.inertial_efforts(q, qdd - commanded_qdd)
-        return self.params.scale * self._arm.efforts(q, qd, qdd)
+        state = tuple(np.asarray(v, dtype=float).tobytes() for v in (q, qd, qdd, commanded_qdd))
+        if state != self._arm_state:
+            if self.params.arm_terms == "tracking":
+                efforts = self._arm.inertial_efforts(q, qdd - commanded_qdd)
+            else:
+                efforts = self._arm.efforts(q, qd, qdd)
+            self._arm_state, self._arm_efforts = state, self.params.scale * efforts
+        return self._arm_efforts.copy()
 
     def efforts(
         self,
