@@ -27,7 +27,6 @@ import functools
 
 import numpy as np
 import pinocchio as pin
-from scipy.linalg import qr
 
 from psm_control.robot import PsmModel
 
@@ -110,6 +109,8 @@ def independent_columns(stacked: np.ndarray, rcond: float = 1e-7) -> np.ndarray:
     QR with column pivoting: the columns whose diagonal in ``R`` is above
     ``rcond`` times the largest, after each column is scaled to unit norm (so units do not decide).
     """
+    from scipy.linalg import qr  # only a fit needs it; imported at the top it cost every arm model's process
+
     norms = np.linalg.norm(stacked, axis=0)
     used = np.flatnonzero(norms > 1e-12)
     _, r, pivots = qr(stacked[:, used] / norms[used], mode="economic", pivoting=True)

@@ -24,17 +24,20 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
-import qpsolvers
 
 from psm_control.active_set import ActiveSetQp
 from psm_control.boxqp import FAILED, solve_box_qp
 from psm_control.errors import InfeasibleProblemError
 from psm_control.reductions import all_of
 from psm_control.robot import PsmConfiguration
+
+if TYPE_CHECKING:  # imported where a problem is built: qpsolvers brings SciPy's sparse matrices and OSQP, a
+    # third of a second of every process's start that the chain's own solvers never need
+    import qpsolvers
 
 __all__ = ["DifferentialIk", "IkResult"]
 
@@ -137,6 +140,8 @@ class DifferentialIk:
         self, configuration: PsmConfiguration, goal_local: np.ndarray, lower: np.ndarray, upper: np.ndarray
     ) -> qpsolvers.Problem:
         """Build the QP for one step (``lower <= dq <= upper``), as an inspectable ``qpsolvers.Problem``."""
+        import qpsolvers
+
         J = configuration.local_jacobian()
         P, q = self._cost(J, self.errors(configuration, goal_local))
         return qpsolvers.Problem(P, q, lb=np.asarray(lower, dtype=float), ub=np.asarray(upper, dtype=float))
@@ -180,6 +185,8 @@ class DifferentialIk:
             )
         status = "solved"
         if self.naive:
+            import qpsolvers
+
             settings = self._settings
             # solve_problem is what solve_qp wraps; it also says "solved inaccurate", which the kept
             # workspace accepts too, instead of returning None.

@@ -36,10 +36,9 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
-import qpsolvers
 
 from psm_control.active_set import ActiveSetQp
 from psm_control.errors import InfeasibleProblemError
@@ -54,6 +53,10 @@ from safety.filter_kernels import (
 )
 from safety.halfspace import project_onto_box_and_halfspace
 from safety.limits import FilterState, Limit, LimitReport
+
+if TYPE_CHECKING:  # imported where a problem is built: qpsolvers brings SciPy's sparse matrices and OSQP, a
+    # third of a second of every process's start that the filter's own solvers never need
+    import qpsolvers
 
 __all__ = ["KKT_TOLERANCE", "FilterResult", "SafetyFilter", "SolvePaths"]
 
@@ -288,6 +291,8 @@ class SafetyFilter:
         return self._problem(np.asarray(dq_nominal, dtype=float))
 
     def _problem(self, dq_nominal: np.ndarray) -> qpsolvers.Problem:
+        import qpsolvers
+
         q = self._f.copy()
         q[: self.dof] = -dq_nominal / self._scale
         h = self._h / self._row_norm
@@ -473,6 +478,8 @@ class SafetyFilter:
     ) -> tuple[np.ndarray | None, np.ndarray, str, int]:
         """The same QP rebuilt and solved from scratch through qpsolvers (``solve_qp`` returns only ``x``;
         ``solve_problem``, which it wraps, also gives the multipliers and the solver's status)."""
+        import qpsolvers
+
         live = u_rows < _INFINITY
         n = self.n if slack else self.dof
         G = np.zeros((self.m_rows, n))

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
 
 from sim.quiet_pybullet import pybullet as p
 from sim.rendering import CLASSES
@@ -170,6 +169,8 @@ def _view_matrix(pose: np.ndarray) -> list[float]:
 def _degrade(rgb: np.ndarray, appearance: Appearance, rng: np.random.Generator) -> np.ndarray:
     image = rgb.astype(float)
     if appearance.blur_px > 0:
+        from scipy.ndimage import gaussian_filter  # only a blurred camera needs it; not every process's start-up
+
         image = gaussian_filter(image, sigma=(appearance.blur_px, appearance.blur_px, 0.0))
     if appearance.noise > 0:
         image = image + rng.normal(0.0, 255.0 * appearance.noise, image.shape)
