@@ -317,8 +317,12 @@ class ControlChain:
         # An inexact force would teach the estimator its own error as stiffness (safety.force_bound).
         stiffness = self.stiffness.update(held, force) if self.force_bound.exact else self.stiffness.value
         jaw = min(self._jaw, float(measured.jaw))
-        # The force was computed with the last command's acceleration (a calibrated dVRK's is: ArmListener).
-        estimate = self.force_bound.update(jaw, held, force, stiffness, current.qdd)
+        # The force was computed with the last command's acceleration (a calibrated dVRK's is: ArmListener), at
+        # the commanded tip speed; a sensing regime bounds the force only within the speeds it was judged at.
+        tip_speed = None
+        if self.force_bound.regime is not None:
+            tip_speed = float(np.linalg.norm(self._command_state.local_jacobian()[:3] @ current.qd))
+        estimate = self.force_bound.update(jaw, held, force, stiffness, current.qdd, tip_speed)
         interventions: tuple[str, ...] = ()
         events: tuple[dict[str, Any], ...] = ()
         intervened = active = 0

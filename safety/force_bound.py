@@ -22,9 +22,12 @@ alone, which stops a retraction after ``(limit - held load) / stiffness bound`` 
 :func:`sensing_warning` says so, with the numbers, at the start of every run.
 
 A calibrated dVRK's error bound holds where its calibration saw the arm move (:class:`SensingRegime`): the
-inertia it identified is known up to the joint accelerations of the logs it was fitted on. On a tick whose
-commanded acceleration (the one the calibration is given) is beyond them, the measured force is trusted only
-to the calibration's wider bound, which takes the inertia as unknown up to the chain's limits.
+inertia it identified is known up to the joint accelerations of the logs it was fitted on, and its tight bound
+was judged on held-out samples at retraction speeds only. On a tick whose commanded acceleration (the one the
+calibration is given) is beyond those, or whose commanded tip speed is above the retraction speeds, the
+measured force is trusted only to the calibration's wider bound, which takes the inertia as unknown up to the
+chain's limits and was judged at every tip speed its logs reached. Faster than those, nothing judged the
+force: it is not trusted at all (the travel bound keeps the limit while the jaws may hold tissue).
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ import numpy as np
 from safety.config import SafetyConfig
 from safety.limits.retraction_force import CLOSED_JAW_RAD
 
-__all__ = ["ForceBound", "ForceEstimate", "SensingRegime", "sensing_warning"]
+__all__ = ["INSIDE", "OUTSIDE", "UNTRUSTED", "ForceBound", "ForceEstimate", "SensingRegime", "sensing_warning"]
 
 #: How long an opened jaw may still hold tissue [s]: two policy steps at the tasks' 10 Hz.
 RELEASE_S = 0.2
@@ -47,6 +50,10 @@ RESETTLE_S = 1.0
 #: Sources of a tick's force estimate.
 MEASURED = "measured"
 TRAVEL = "travel"
+#: Where a tick is in a :class:`SensingRegime`.
+INSIDE = "inside"
+OUTSIDE = "outside"
+UNTRUSTED = "untrusted"
 
 
 class ForceEstimate(NamedTuple):
@@ -71,15 +78,31 @@ class SensingRegime(NamedTuple):
     Attributes:
         covered_acceleration: Per joint, the largest acceleration magnitude the bound covers (6,) (rad/s^2;
             m/s^2 on the insertion; inf: no limit).
-        error_outside_n: The error bound beyond them [N].
+        error_outside_n: The error bound beyond them, and at tip speeds above ``retraction_tip_speed_m_s`` [N].
+        retraction_tip_speed_m_s: The fastest tool-tip speed the bound covers [m/s] (inf: any).
+        covered_tip_speed_m_s: The fastest tool-tip speed ``error_outside_n`` covers [m/s]; beyond it the force is
+            not trusted (inf: any).
     """
 
     covered_acceleration: np.ndarray
     error_outside_n: float
+    retraction_tip_speed_m_s: float = math.inf
+    covered_tip_speed_m_s: float = math.inf
 
     def covers(self, qdd: np.ndarray) -> bool:
         """Whether the joint accelerations ``qdd`` (6,) are within the covered ones."""
         return bool(np.all(np.abs(np.asarray(qdd, dtype=float)) <= self.covered_acceleration))
+
+    def where(self, qdd: np.ndarray | None, tip_speed_m_s: float | None) -> str:
+        """Where a tick commanded with ``qdd`` at ``tip_speed_m_s`` [m/s] is (None: within the regime): :data:`INSIDE`,
+        :data:`OUTSIDE` (beyond the covered accelerations or the retraction speeds: ``error_outside_n``) or
+        :data:`UNTRUSTED` (faster than the covered tip speed, or a speed that is not a number)."""
+        speed = 0.0 if tip_speed_m_s is None else float(tip_speed_m_s)
+        if not speed <= self.covered_tip_speed_m_s:
+            return UNTRUSTED
+        if speed > self.retraction_tip_speed_m_s or (qdd is not None and not self.covers(qdd)):
+            return OUTSIDE
+        return INSIDE
 
 
 class ForceBound:
@@ -116,8 +139,11 @@ class ForceBound:
         self.held_load_bound_n = float(held_load_bound_n)
         self.period_s = float(period_s)
         self.regime = regime
-        #: Ticks whose commanded acceleration was beyond the regime (the wider bound taken), since construction.
+        #: Ticks whose commanded acceleration or tip speed was beyond the regime (the wider bound taken), since
+        #: construction.
         self.ticks_outside_regime = 0
+        #: Ticks faster than any tip speed the regime covers (the force not trusted), since construction.
+        self.ticks_untrusted = 0
         #: The error bound the last update trusted the measured force to [N].
         self.tick_error_n = self.error_n
         self.reset()
@@ -154,15 +180,23 @@ class ForceBound:
         measured_force_n: np.ndarray,
         learned_stiffness_n_per_m: float,
         commanded_qdd: np.ndarray | None = None,
+        commanded_tip_speed_m_s: float | None = None,
     ) -> ForceEstimate:
-        """The tick's estimate from the jaw, the grasp point (base frame) [m], the measured force [N] and the joint
-        accelerations the force was computed with (the last command's; None: within the regime)."""
+        """The tick's estimate from the jaw, the grasp point (base frame) [m], the measured force [N], and the joint
+        accelerations and tool-tip speed [m/s] the force was computed at (the last command's; None: within the
+        regime). A force not trusted (:meth:`SensingRegime.where`) has an infinite margin: the filter then
+        takes no contact from it, and the travel bound decides every tick the jaws may hold tissue."""
         if self.exact:
             return ForceEstimate(measured_force_n, 0.0, learned_stiffness_n_per_m, MEASURED)
         error_n = self.error_n
-        if self.regime is not None and commanded_qdd is not None and not self.regime.covers(commanded_qdd):
-            error_n = max(error_n, self.regime.error_outside_n)
-            self.ticks_outside_regime += 1
+        if self.regime is not None:
+            where = self.regime.where(commanded_qdd, commanded_tip_speed_m_s)
+            if where == OUTSIDE:
+                error_n = max(error_n, self.regime.error_outside_n)
+                self.ticks_outside_regime += 1
+            elif where == UNTRUSTED:
+                error_n = math.inf
+                self.ticks_untrusted += 1
         self.tick_error_n = error_n
         if jaw_rad < CLOSED_JAW_RAD:
             if self._grasped_at is None or self._open_s >= RESETTLE_S:

@@ -153,6 +153,8 @@ def dvrk_episode(
         bound = chain.force_bound
         if bound.regime is not None:  # the chain's count runs over the episodes: the report's is the total
             report.force_sensing_ticks_beyond = bound.ticks_outside_regime
+            report.force_sensing_ticks_untrusted = bound.ticks_untrusted
+            report.force_sensing_trusted_tip_speed_m_s = bound.regime.covered_tip_speed_m_s
             report.force_sensing_error_beyond_n = bound.regime.error_outside_n
     entry: dict[str, Any] = {
         "episode": episode,

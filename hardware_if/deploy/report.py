@@ -74,6 +74,8 @@ class DeployReport:
     force_limit_stalls: int = 0
     force_sensing_error_beyond_n: float = 0.0
     force_sensing_ticks_beyond: int = 0
+    force_sensing_ticks_untrusted: int = 0
+    force_sensing_trusted_tip_speed_m_s: float | None = None
 
     @property
     def exit_code(self) -> int:
@@ -133,8 +135,16 @@ class DeployReport:
         if self.force_sensing_ticks_beyond:
             out.append(
                 f"  force sensing: on {self.force_sensing_ticks_beyond} of {self.commands} ticks the commanded "
-                "accelerations were beyond those the calibration was fitted on; the force was trusted there only to "
-                f"its error_bound_n {self.force_sensing_error_beyond_n:.2f} N"
+                "accelerations were beyond those the calibration was fitted on, or the tip moved faster than "
+                "retraction speeds; the force was trusted there only to its error_bound_n "
+                f"{self.force_sensing_error_beyond_n:.2f} N"
+            )
+        if self.force_sensing_ticks_untrusted:
+            out.append(
+                f"  force sensing: on {self.force_sensing_ticks_untrusted} of {self.commands} ticks the commanded tip "
+                f"speed was above {self.force_sensing_trusted_tip_speed_m_s:.3g} m/s, the fastest the calibration's "
+                "logs reached; the force was not trusted there (the travel bound kept the limit while the jaws "
+                "could hold tissue)"
             )
         if self.force_limit_stalls:
             out.append(

@@ -30,6 +30,7 @@ __all__ = [
     "EXACT_SENSING",
     "MAX_FILE_BYTES",
     "MIN_BOUND_N",
+    "RETRACTION_TIP_SPEED_M_S",
     "WrenchCalibration",
     "read_calibration",
     "within_accelerations",
@@ -44,6 +45,10 @@ EXACT_SENSING = "ideal"
 #: calibration left on a public PSM log held out is 1.72 N at most (radiang's three-joint logs, 0.38 N RMS), and a
 #: dedicated 3-axis tip sensor's RMS error is 0.15 N; a bound below this says a log showed no sensor at all.
 MIN_BOUND_N = 0.5
+#: Tool-tip speed up to which a retraction moves [m/s]. A full policy action moves the tip 5 mm along each
+#: axis (``SafetyConfig.max_step_m``) per 10 Hz policy step: at most sqrt(3) x 0.05 = 0.087 m/s, below this.
+#: The public excitation logs run at 0.25-0.42 m/s; only their samples up to this speed set the tight bound.
+RETRACTION_TIP_SPEED_M_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -78,6 +83,10 @@ class WrenchCalibration:
             to these, so ``error_bound_with_acceleration_n`` bounds only motions whose accelerations are within
             them (:meth:`covers`); beyond, ``error_bound_n`` (the inertia taken as unknown up to the chain's
             limits). None in files of earlier versions: every acceleration covered.
+        covered_tip_speed_m_s: The fastest tool-tip speed of the logs it was fitted on [m/s]: ``error_bound_n``
+            bounds motions up to it (``error_bound_with_acceleration_n`` only up to
+            :data:`RETRACTION_TIP_SPEED_M_S`), and a deploy does not trust the force beyond it. None in files of
+            earlier versions: ``error_bound_n`` was judged only up to the retraction speeds, and is trusted only there.
     """
 
     arm: str
@@ -95,22 +104,38 @@ class WrenchCalibration:
     max_after_retraction_speed_n: float | None = None
     max_after_without_acceleration_n: float | None = None
     covered_acceleration: tuple[float | None, ...] | None = None
+    covered_tip_speed_m_s: float | None = None
 
     def covers(self, qdd: np.ndarray) -> np.ndarray:
         """Whether each acceleration (6,) or each row of (N, 6) is within :attr:`covered_acceleration`."""
         return within_accelerations(self.covered_acceleration, qdd)
 
+    @property
+    def bounded_tip_speed_m_s(self) -> float:
+        """The fastest tool-tip speed :attr:`error_bound_n` bounds [m/s]: :attr:`covered_tip_speed_m_s`, at least the
+        retraction speeds; only those for a file of an earlier version."""
+        if self.covered_tip_speed_m_s is None:
+            return RETRACTION_TIP_SPEED_M_S
+        return max(self.covered_tip_speed_m_s, RETRACTION_TIP_SPEED_M_S)
+
     def sensing_regime(self) -> SensingRegime:
-        """Where :attr:`error_bound_with_acceleration_n` holds, for the safety filter; :attr:`error_bound_n` beyond."""
-        return SensingRegime(_acceleration_limits(self.covered_acceleration), self.error_bound_n)
+        """Where :attr:`error_bound_with_acceleration_n` holds, for the safety filter; :attr:`error_bound_n` beyond it
+        up to :attr:`bounded_tip_speed_m_s`; faster, no bound."""
+        return SensingRegime(
+            _acceleration_limits(self.covered_acceleration),
+            self.error_bound_n,
+            RETRACTION_TIP_SPEED_M_S,
+            self.bounded_tip_speed_m_s,
+        )
 
     def regime_words(self) -> str:
         """The motions :attr:`error_bound_with_acceleration_n` bounds, for a user."""
+        speed = f"tip speeds up to {RETRACTION_TIP_SPEED_M_S:g} m/s"
         if self.covered_acceleration is None:
-            return "any acceleration (a file of an earlier version records none)"
+            return f"{speed} and any acceleration (a file of an earlier version records none)"
         units = ["rad/s^2", "rad/s^2", "m/s^2", "rad/s^2", "rad/s^2", "rad/s^2"]
         shown = [f"{v:.3g} {u}" for v, u in zip(self.covered_acceleration, units, strict=True) if v is not None]
-        return "joint accelerations within those it was fitted on (" + ", ".join(shown) + ")"
+        return f"{speed} and joint accelerations within those it was fitted on (" + ", ".join(shown) + ")"
 
     @property
     def origin(self) -> str:
@@ -221,6 +246,7 @@ def read_calibration(path: str | Path, arm: str | None = None, *, exact_console:
             max_after_retraction_speed_n=_optional_float(data, "max_after_retraction_speed_n"),
             max_after_without_acceleration_n=_optional_float(data, "max_after_without_acceleration_n"),
             covered_acceleration=_optional_accelerations(data),
+            covered_tip_speed_m_s=_optional_float(data, "covered_tip_speed_m_s"),
         )
     except (AttributeError, KeyError, TypeError, ValueError) as e:
         raise InputFileError(field, path, f"a file this version of calibrate-wrench wrote ({e})") from e
@@ -230,7 +256,12 @@ def read_calibration(path: str | Path, arm: str | None = None, *, exact_console:
 
 def _optional_float(data: dict[str, Any], key: str) -> float | None:
     """``data[key]`` as a float, None when it is missing or null (a regime the held-out log did not reach)."""
-    return None if data.get(key) is None else float(data[key])
+    if data.get(key) is None:
+        return None
+    try:
+        return float(data[key])
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{key}: a number or null ({e})") from None
 
 
 def _optional_accelerations(data: dict[str, Any]) -> tuple[float | None, ...] | None:
@@ -258,6 +289,9 @@ def _check(calibration: WrenchCalibration, path: str, arm: str | None, exact_con
     covered = [v for v in calibration.covered_acceleration or () if v is not None]
     if not all(math.isfinite(v) and v > 0.0 for v in covered):
         raise InputFileError(field, path, f"covered_acceleration: finite and > 0 (this file has {covered!r})")
+    speed = calibration.covered_tip_speed_m_s
+    if speed is not None and not (math.isfinite(speed) and speed > 0.0):
+        raise InputFileError(field, path, f"covered_tip_speed_m_s: finite and > 0 (this file has {speed!r})")
     if arm is not None and calibration.arm != arm:
         raise InputFileError(field, path, f"a calibration of {arm} (this one is {calibration.arm}'s)")
     bound = calibration.error_bound_n

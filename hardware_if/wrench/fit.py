@@ -52,7 +52,12 @@ from typing import Any
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from hardware_if.wrench.calibration import MIN_BOUND_N, WrenchCalibration, within_accelerations
+from hardware_if.wrench.calibration import (
+    MIN_BOUND_N,
+    RETRACTION_TIP_SPEED_M_S,
+    WrenchCalibration,
+    within_accelerations,
+)
 from hardware_if.wrench.joint_logs import MIN_SAMPLES, JointLog, TooFewSamplesError, check_free_space_log
 from psm_control.effort_model import independent_columns, shared_regressor
 from psm_control.errors import ConfigurationError
@@ -75,6 +80,7 @@ __all__ = [
     "check_calibration",
     "coverage_line",
     "covered_acceleration",
+    "covered_tip_speed",
     "fit_calibration",
     "inertia_allowance_n",
     "prepare_log",
@@ -85,10 +91,6 @@ __all__ = [
 CUTOFF_HZ = 4.0
 #: The calibration's error bound over its largest held-out error at retraction speeds.
 BOUND_MARGIN = 1.25
-#: Tool-tip speed up to which a retraction moves [m/s]. A full policy action moves the tip 5 mm along each
-#: axis (``SafetyConfig.max_step_m``) per 10 Hz policy step: at most sqrt(3) x 0.05 = 0.087 m/s, below this.
-#: The public excitation logs run at 0.25-0.42 m/s; only their samples up to this speed set the bound.
-RETRACTION_TIP_SPEED_M_S = 0.1
 #: Fewest held-out samples at retraction speeds whose largest error alone sets the bounds: fewer say little about
 #: the error there, and the bounds take the largest held-out error at any speed as well. WPI's full-speed log held
 #: out (its last third) has 35, all at one turnaround, whose 1.11 N (a 1.39 N bound) the same path at half speed
@@ -211,6 +213,8 @@ class FreeSpaceError:
             acceleration limits (``SafetyConfig().acceleration``), as a deploy's are (N,).
         within_covered_acceleration: Whether each sample's joint accelerations are within those the calibration
             was fitted on (:attr:`WrenchCalibration.covered_acceleration`) (N,).
+        bounded_tip_speed_m_s: The fastest tip speed ``error_bound_n`` bounds
+            (:attr:`WrenchCalibration.bounded_tip_speed_m_s`) [m/s].
     """
 
     before_n: np.ndarray
@@ -220,6 +224,7 @@ class FreeSpaceError:
     tip_speed_m_s: np.ndarray
     within_acceleration_limits: np.ndarray
     within_covered_acceleration: np.ndarray
+    bounded_tip_speed_m_s: float = RETRACTION_TIP_SPEED_M_S
 
     @staticmethod
     def _rms(values: np.ndarray) -> float:
@@ -249,21 +254,23 @@ class FreeSpaceError:
 
         ``error_bound_with_acceleration_n`` bounds the error with the acceleration known at tip speeds up to
         :data:`RETRACTION_TIP_SPEED_M_S` and joint accelerations within those the calibration was fitted on (its
-        inertia is known up to them); ``error_bound_n`` the error without the acceleration (a deploy's) there,
-        while the joints accelerate within the chain's limits (its inertia allowance is taken at those limits).
+        inertia is known up to them); ``error_bound_n`` the error without the acceleration (a deploy's) at every
+        tip speed up to :attr:`bounded_tip_speed_m_s` (the fastest its logs reached), while the joints accelerate
+        within the chain's limits (its inertia allowance is taken at those limits). Faster, nothing is bounded.
         """
-        slow = self.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S
-        speed = f"tip speed <= {RETRACTION_TIP_SPEED_M_S:g} m/s"
+        fast = self.bounded_tip_speed_m_s
         return {
             "error_bound_with_acceleration_n": (
                 self.in_retraction_regime,
                 self.after_n,
-                f"{speed} and joint accelerations within those fitted on, the acceleration known",
+                f"tip speed <= {RETRACTION_TIP_SPEED_M_S:g} m/s and joint accelerations within those fitted on, the "
+                "acceleration known",
             ),
             "error_bound_n": (
-                slow & self.within_acceleration_limits,
+                (self.tip_speed_m_s <= fast) & self.within_acceleration_limits,
                 self.after_live_n,
-                f"{speed} and joint accelerations within the chain's limits, without the acceleration",
+                f"tip speed <= {fast:.3g} m/s and joint accelerations within the chain's limits, without the "
+                "acceleration",
             ),
         }
 
@@ -326,12 +333,21 @@ def covered_acceleration(logs: Sequence[PreparedLog]) -> tuple[float | None, ...
     return tuple(out)
 
 
+def covered_tip_speed(logs: Sequence[PreparedLog]) -> float:
+    """The fastest tool-tip speed of the logs [m/s]."""
+    return max(float(p.tip_speed_m_s.max()) for p in logs if len(p.tip_speed_m_s))
+
+
 def _free_space_errors(
-    parameters: np.ndarray, logs: Sequence[PreparedLog], covered: tuple[float | None, ...] | None = None
+    parameters: np.ndarray,
+    logs: Sequence[PreparedLog],
+    covered: tuple[float | None, ...] | None = None,
+    bounded_tip_speed_m_s: float = RETRACTION_TIP_SPEED_M_S,
 ) -> list[FreeSpaceError]:
     """The free-space error of each parameter vector (the columns of ``parameters``, (columns, k)) on ``logs``,
     in one pass over the logs' regressors, a chunk at a time; ``covered``: the accelerations per joint the
-    calibration was fitted on, which bound the retraction regime (None: every acceleration)."""
+    calibration was fitted on, which bound the retraction regime (None: every acceleration);
+    ``bounded_tip_speed_m_s``: the fastest tip speed ``error_bound_n`` bounds."""
     k = parameters.shape[1]
     before: list[np.ndarray] = []
     after: list[np.ndarray] = []
@@ -354,20 +370,25 @@ def _free_space_errors(
     after_all, live_all, within_all = np.concatenate(after), np.concatenate(live), np.concatenate(within)
     known_all = np.concatenate(known)
     return [
-        FreeSpaceError(shared[0], after_all[:, m], live_all[:, m], shared[1], shared[2], within_all, known_all)
+        FreeSpaceError(
+            shared[0],
+            after_all[:, m],
+            live_all[:, m],
+            shared[1],
+            shared[2],
+            within_all,
+            known_all,
+            bounded_tip_speed_m_s,
+        )
         for m in range(k)
     ]
 
 
-def _free_space_error(
-    parameters: np.ndarray, logs: Sequence[PreparedLog], covered: tuple[float | None, ...] | None = None
-) -> FreeSpaceError:
-    return _free_space_errors(np.asarray(parameters, dtype=float)[:, None], logs, covered)[0]
-
-
 def check_calibration(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) -> FreeSpaceError:
     """The free-space error of the console's estimate and of ``calibration`` on ``logs``."""
-    return _free_space_error(calibration.parameter_vector(), logs, calibration.covered_acceleration)
+    parameters = calibration.parameter_vector()[:, None]
+    covered, fast = calibration.covered_acceleration, calibration.bounded_tip_speed_m_s
+    return _free_space_errors(parameters, logs, covered, fast)[0]
 
 
 def bound_verdict(calibration: WrenchCalibration, error: FreeSpaceError) -> dict[str, Any]:
@@ -579,8 +600,13 @@ def fit_calibration(
     dynamic = shared_regressor().friction_start // 4  # the first columns: the rigid body's inertia and Coriolis
     fits = [_solve(factors, rows_total, samples, exclude=0), _solve(factors, rows_total, samples, exclude=dynamic)]
     # Only what the fit saw is bounded: its inertia is known up to the accelerations of its own logs.
-    coverage = covered_acceleration(fit)
-    candidates = _free_space_errors(np.column_stack([parameters for _, parameters in fits]), held_out, coverage)
+    coverage, fastest = covered_acceleration(fit), covered_tip_speed(fit)
+    candidates = _free_space_errors(
+        np.column_stack([parameters for _, parameters in fits]),
+        held_out,
+        coverage,
+        max(fastest, RETRACTION_TIP_SPEED_M_S),
+    )
     errors = [FreeSpaceError._rms(candidate.after_n) for candidate in candidates]
     with_dynamics = not errors[0] > (1.0 - DYNAMICS_GAIN) * errors[1]
     columns, parameters = fits[0] if with_dynamics else fits[1]
@@ -607,5 +633,6 @@ def fit_calibration(
         max_after_retraction_speed_n=slow,
         max_after_without_acceleration_n=float(live[inside].max()) if np.any(inside) else None,
         covered_acceleration=coverage,
+        covered_tip_speed_m_s=fastest,
     )
     return calibration, error

@@ -297,7 +297,9 @@ def run(args: argparse.Namespace) -> int:
         bound = (
             "its error_bound_with_acceleration_n: the calibration is given the chain's commanded acceleration, "
             f"and the bound holds while the arm tracks it, with {calibration.regime_words()}; beyond them, to "
-            f"its error_bound_n {calibration.error_bound_n:.3g} N"
+            f"its error_bound_n {calibration.error_bound_n:.3g} N up to tip speeds of "
+            f"{calibration.bounded_tip_speed_m_s:.3g} m/s (the fastest its logs reached); faster, the force is not "
+            "trusted and the travel bound keeps the limit"
             if calibration is not None
             else "--force-sensor: the promise holds while the sensor's error stays within it"
             if args.force_sensor is not None
