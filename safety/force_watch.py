@@ -114,13 +114,15 @@ class ForceLimitWatch:
         """Take one tick's measured force (a 3-vector or a magnitude) [N]; return an excursion that just ended.
 
         ``error_n``: this tick's error bound where it is wider than the watch's (a calibration beyond the
-        accelerations it was fitted on, :class:`safety.force_bound.SensingRegime`). A non-finite force counts as
-        above the limit: it is no evidence that the force is below it.
+        accelerations it was fitted on, :class:`safety.force_bound.SensingRegime`; inf: the force is not trusted on
+        this tick, which is not judged). A non-finite force counts as above the limit: it is no evidence that the
+        force is below it.
         """
         vector = np.asarray(force_n, dtype=float).reshape(-1)
         magnitude = float(math.sqrt(float(vector @ vector))) if vector.size > 1 else abs(float(vector[0]))
         tick_error_n = self.error_n if error_n is None else max(self.error_n, float(error_n))
-        if magnitude <= self.limit_n + tick_error_n:  # NaN fails this comparison
+        # NaN fails the comparison; a force not trusted at all (an infinite bound) is no evidence either way.
+        if magnitude <= self.limit_n + tick_error_n or tick_error_n == math.inf:
             return self.finish()
         if self._ticks == 0:
             self._start, self._peak, self._error = float(stamp_s), 0.0, self.error_n

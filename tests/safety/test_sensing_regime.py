@@ -55,6 +55,10 @@ def test_the_watch_counts_an_excursion_only_beyond_the_ticks_bound() -> None:
     excursion = watch.finish()
     assert excursion is not None and excursion.error_n == 8.0 and excursion.peak_n == 12.0
     assert excursion.ratio == (12.0 - 8.0) / 3.0
+    # A tick whose force is not trusted is not judged, whatever it reads, and ends an excursion in progress.
+    assert watch.update(np.array([5.0, 0.0, 0.0]), 0.03, 1.0) is None and watch.above
+    assert watch.update(np.full(3, np.nan), 0.04, np.inf) is not None and not watch.above
+    assert watch.update(np.array([50.0, 0.0, 0.0]), 0.05, np.inf) is None and not watch.above
 
 
 def test_above_the_retraction_speeds_the_wider_bound_and_beyond_the_covered_speed_none() -> None:
