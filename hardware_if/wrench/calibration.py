@@ -32,6 +32,7 @@ __all__ = [
     "MIN_BOUND_N",
     "RETRACTION_TIP_SPEED_M_S",
     "WrenchCalibration",
+    "bounded_tip_speed",
     "read_calibration",
     "within_accelerations",
 ]
@@ -114,9 +115,7 @@ class WrenchCalibration:
     def bounded_tip_speed_m_s(self) -> float:
         """The fastest tool-tip speed :attr:`error_bound_n` bounds [m/s]: :attr:`covered_tip_speed_m_s`, at least the
         retraction speeds; only those for a file of an earlier version."""
-        if self.covered_tip_speed_m_s is None:
-            return RETRACTION_TIP_SPEED_M_S
-        return max(self.covered_tip_speed_m_s, RETRACTION_TIP_SPEED_M_S)
+        return bounded_tip_speed(self.covered_tip_speed_m_s)
 
     def sensing_regime(self) -> SensingRegime:
         """Where :attr:`error_bound_with_acceleration_n` holds, for the safety filter; :attr:`error_bound_n` beyond it
@@ -167,6 +166,14 @@ class WrenchCalibration:
     def write(self, path: Path, field: str = "--out") -> None:
         """Write the calibration as JSON, whole or not at all (:func:`psm_control.outputs.write_atomic`)."""
         write_atomic(path, json.dumps({"kind": "wrench_calibration", **asdict(self)}, indent=2) + "\n", field)
+
+
+def bounded_tip_speed(covered_tip_speed_m_s: float | None) -> float:
+    """The fastest tool-tip speed ``error_bound_n`` bounds for logs that reached ``covered_tip_speed_m_s`` [m/s]: that
+    speed, at least the retraction speeds (those alone for None, a file of an earlier version)."""
+    if covered_tip_speed_m_s is None:
+        return RETRACTION_TIP_SPEED_M_S
+    return max(covered_tip_speed_m_s, RETRACTION_TIP_SPEED_M_S)
 
 
 def within_accelerations(covered: tuple[float | None, ...] | None, qdd: np.ndarray) -> np.ndarray:

@@ -56,6 +56,7 @@ from hardware_if.wrench.calibration import (
     MIN_BOUND_N,
     RETRACTION_TIP_SPEED_M_S,
     WrenchCalibration,
+    bounded_tip_speed,
     within_accelerations,
 )
 from hardware_if.wrench.joint_logs import MIN_SAMPLES, JointLog, TooFewSamplesError, check_free_space_log
@@ -224,7 +225,7 @@ class FreeSpaceError:
     tip_speed_m_s: np.ndarray
     within_acceleration_limits: np.ndarray
     within_covered_acceleration: np.ndarray
-    bounded_tip_speed_m_s: float = RETRACTION_TIP_SPEED_M_S
+    bounded_tip_speed_m_s: float
 
     @staticmethod
     def _rms(values: np.ndarray) -> float:
@@ -341,8 +342,8 @@ def covered_tip_speed(logs: Sequence[PreparedLog]) -> float:
 def _free_space_errors(
     parameters: np.ndarray,
     logs: Sequence[PreparedLog],
-    covered: tuple[float | None, ...] | None = None,
-    bounded_tip_speed_m_s: float = RETRACTION_TIP_SPEED_M_S,
+    covered: tuple[float | None, ...] | None,
+    bounded_tip_speed_m_s: float,
 ) -> list[FreeSpaceError]:
     """The free-space error of each parameter vector (the columns of ``parameters``, (columns, k)) on ``logs``,
     in one pass over the logs' regressors, a chunk at a time; ``covered``: the accelerations per joint the
@@ -605,7 +606,7 @@ def fit_calibration(
         np.column_stack([parameters for _, parameters in fits]),
         held_out,
         coverage,
-        max(fastest, RETRACTION_TIP_SPEED_M_S),
+        bounded_tip_speed(fastest),
     )
     errors = [FreeSpaceError._rms(candidate.after_n) for candidate in candidates]
     with_dynamics = not errors[0] > (1.0 - DYNAMICS_GAIN) * errors[1]
