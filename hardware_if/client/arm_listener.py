@@ -6,7 +6,8 @@ non-finite one latches a data fault, after which the client's deadman holds
 (:class:`~hardware_if.client.psm_client.PsmClient`, which adds the commands to this). A ``measured_js`` is
 a new measurement only when its stamp advanced: one stamped as the last is a repeat (it does not make the
 measurement fresh), and a stamp that went back or jumped ahead is a data fault
-(:func:`~hardware_if.client.deadman.stamp_step_fault`). Its reads never
+(:func:`~hardware_if.client.deadman.stamp_step_fault`), a jump from the moment the clock is pinned
+(:meth:`ArmListener.pin_clock`, before a program's first command). Its reads never
 block; its waits block until the console has published what they wait for, or time out. The force is the
 console's ``body/measured_cf``, or the joint efforts with a wrench calibration's model removed.
 """
@@ -86,6 +87,7 @@ class ArmListener(Node):
         # may not run ahead of by more than STAMP_JUMP_S. They are the last taken, not the last second's: a
         # stall of this process, however long, leaves the ones before it to judge by.
         self._stamp_offsets_s: deque[float] = deque(maxlen=STAMP_OFFSETS_KEPT)
+        self._clock_pinned = False
         self._setpoint_q: np.ndarray | None = None
         self._jaw = 0.0
         self._jaw_velocity = 0.0
@@ -183,7 +185,14 @@ class ArmListener(Node):
                     self._repeated_rx_s = rx_s  # the same measurement again: it stays as old as it was
                     return
                 ahead_s = (stamp_s - rx_s) - max(self._stamp_offsets_s)
-                fault = stamp_step_fault(convert.time_to_seconds(last), stamp_s, ahead_s, STAMP_JUMP_S)
+                last_s = convert.time_to_seconds(last)
+                fault = stamp_step_fault(last_s, stamp_s, ahead_s, STAMP_JUMP_S)
+                if fault and stamp_s > last_s and not self._clock_pinned:
+                    # A jump before the clock is pinned: the measurements it was judged against may all have
+                    # been late (the first ones a process takes while it is still starting, on a busy
+                    # machine), so they are no baseline; judged from here on.
+                    self._stamp_offsets_s.clear()
+                    fault = ""
                 if fault:
                     self._invalid("measured_js", fault)
                     return
@@ -192,6 +201,19 @@ class ArmListener(Node):
             self._stamp_offsets_s.append(stamp_s - rx_s)
             self._repeated_rx_s = None
             self._lock.notify_all()
+
+    def pin_clock(self) -> None:
+        """Judge every ``measured_js`` stamp from now on against the measurements before it: one that jumps
+        ahead of its arrival by more than :data:`~hardware_if.client.deadman.STAMP_JUMP_S` is a data fault.
+
+        Before this (a program starting, commanding nothing yet), a jump starts the baseline afresh instead:
+        the first measurements a process takes may have waited in its queue while it started (seconds, on a
+        busy machine), and a prompt one after them looks like a clock that leapt. A stamp that goes back is a
+        fault either way. A deploy pins it at each episode's first tick, :class:`PsmClient` at its first
+        ``servo_jp`` at the latest.
+        """
+        with self._lock:
+            self._clock_pinned = True
 
     def _on_setpoint_js(self, message: JointState) -> None:
         q = self._joints(message, "setpoint_js")

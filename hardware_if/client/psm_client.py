@@ -25,7 +25,13 @@ from sensor_msgs.msg import JointState  # type: ignore[import-untyped]
 from hardware_if.client.arm_listener import CLOCK_SLACK_S, ArmListener
 from hardware_if.client.deadman import ArmFacts, Deadman, DeadmanStatus
 from hardware_if.common import convert
-from hardware_if.common.commander_watch import NAME_WAIT_S, UNNAMED, WATCH_PERIOD_S, CommanderWatch
+from hardware_if.common.commander_watch import (
+    NAME_WAIT_S,
+    NAMING_TIMEOUT_S,
+    UNNAMED,
+    WATCH_PERIOD_S,
+    CommanderWatch,
+)
 from hardware_if.common.crtk import DEFAULT_ARM, JAW_JOINT_NAME, JOINT_NAMES, event_qos, periodic_qos
 from hardware_if.common.errors import DvrkError, DvrkTimeoutError
 from psm_control.commands import JointCommand
@@ -164,6 +170,17 @@ class PsmClient(ArmListener):
             reason = self.exclusive()
         return reason
 
+    def named(self, reason: str, timeout_s: float = NAMING_TIMEOUT_S) -> str:
+        """A hold's ``reason`` with the names of the other nodes it is about, once discovery brings them.
+
+        Called with the arm already held, so waiting for the names costs time only; ``reason`` as it is when
+        no name arrives within ``timeout_s``, or when the conflict is gone (the other node left).
+        """
+        if UNNAMED not in reason or self._commanders is None:
+            return reason
+        named = self._commanders.named_conflict(wait_s=timeout_s)
+        return named if named and UNNAMED not in named else reason
+
     def exclusive(self) -> str:
         """Read the graph now: "" when this program alone commands the arm and one console serves it.
 
@@ -248,6 +265,7 @@ class PsmClient(ArmListener):
         self._command_publisher("servo_jp")  # a listen-only client refuses before touching the deadman
         with self._lock:
             self._commanding = True
+            self._clock_pinned = True
             status = self._apply_deadman()
             if status.holding:
                 self._send_hold()

@@ -35,6 +35,7 @@ __all__ = [
     "DISCOVERY_QUIET_S",
     "DISCOVERY_S",
     "NAME_WAIT_S",
+    "NAMING_TIMEOUT_S",
     "SENSED_TOPICS",
     "UNNAMED",
     "WATCH_PERIOD_S",
@@ -64,6 +65,10 @@ WATCH_PERIOD_S = 0.1
 #: An endpoint is discovered a little before its node's name (ROS sends names on a topic of its own): how
 #: long a conflict waits for the names before it is said without them [s].
 NAME_WAIT_S = 0.5
+#: How long a hold already in force waits for the names of the nodes it is about before it is said without
+#: them [s]: the arm is held meanwhile, and on a busy machine a name arrived more than NAME_WAIT_S after its
+#: node's endpoints.
+NAMING_TIMEOUT_S = 10.0
 #: How long after joining the domain a program has heard every participant already there [s]. Fast DDS
 #: announces each participant every 3 s (its default lease announcement period) and a newcomer often
 #: learns of the others only from that: a new node saw a running sim-dvrk after 0.0 to 2.4 s over six

@@ -58,6 +58,7 @@ def dvrk_episode(
     rotation_rcm_to_base = base_frame[:3, :3]
     # The arm as measured and where the chain sends it (in a dry run: where it would), 20 times a second.
     scene = SceneStream(PsmScene(view.model, f"{options.arm}_base", base_frame), [recorder], period_s=0.05)
+    client.pin_clock()  # from the first tick on, a console clock that jumps is a data fault
     chain.reset(measured)
     tracking = TrackingWatch(chain.config.deadman_timeout_s + 2 * chain.control_period_s)
     tracking.reset(measured.q, time.monotonic())
@@ -135,7 +136,7 @@ def dvrk_episode(
                 if status.ok and output.safety_stop and output.reason.startswith(DEADMAN_STOP):
                     status = status._replace(ok=False, reason=f"stale: the chain's {output.reason}")
                 if not status.ok:  # the dry run holds as the deploy would: it rehearses the real thing
-                    fault = deadman_hold(status.reason)
+                    fault = deadman_hold(client, status.reason)
                     fault.data.update(episode=episode, step=step, measured=measured_payload(measured))
                     raise fault
                 next_tick += chain.control_period_s
@@ -173,8 +174,10 @@ def dvrk_episode(
     return entry
 
 
-def deadman_hold(reason: str) -> HoldError:
-    """The hold of a deadman verdict such as ``"stale: measured_js 0.4 s old"``."""
+def deadman_hold(client: Any, reason: str) -> HoldError:
+    """The hold of a deadman verdict such as ``"stale: measured_js 0.4 s old"``, naming the other commander
+    or console it is about once the graph has its name (:meth:`PsmClient.named`)."""
+    reason = client.named(reason)
     kind, _, detail = reason.partition(": ")
     return HoldError(kind, detail or reason)
 

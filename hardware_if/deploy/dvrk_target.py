@@ -122,7 +122,7 @@ def deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder
             except DvrkError as e:
                 reason = client.status.reason  # invalid data is said as the deadman says it, not as "not ready"
                 invalid = reason.startswith("invalid data")
-                raise (deadman_hold(reason) if invalid else HoldError("not ready", str(e))) from None
+                raise (deadman_hold(client, reason) if invalid else HoldError("not ready", str(e))) from None
             client.settle_graph(options.wait_s)  # the other programs on the domain, not only the console
             freeze_startup_heap()  # before the first command: short collector pauses from here on
             _require_exclusive(client, "before the first command")
@@ -186,7 +186,7 @@ def deploy_dvrk(options: DeployOptions, report: DeployReport, recorder: Recorder
                     measured.q, view.model.home(), measured_jaw=measured.jaw, start_jaw=start_jaw
                 )
                 if offset:
-                    fault = deadman_hold(reason) if reason else HoldError("not at start", offset)
+                    fault = deadman_hold(client, reason) if reason else HoldError("not at start", offset)
                     fault.data.update(episode=episode, seed=seed)
                     raise fault
                 echo(f"episode {episode}: started (seed {seed})")
@@ -214,7 +214,7 @@ def _to_start(
     """Before an episode: the arm and jaw at the episode's start, sent back there if not (held in a dry run)."""
     reason = client.wait_ready(options.wait_s)  # where an arm is matters once it is ready to be commanded
     if reason:
-        fault = deadman_hold(reason)
+        fault = deadman_hold(client, reason)
         fault.data.update(episode=episode)
         raise fault
     measured = client.measure()
@@ -259,7 +259,7 @@ def _require_exclusive(client: Any, when: str) -> None:
     """Hold, before anything reaches a console, when another commander or console of the arm is in the graph."""
     reason = client.exclusive()
     if reason:
-        fault = deadman_hold(reason)
+        fault = deadman_hold(client, reason)
         fault.data.update(checked=when)
         raise fault
 
