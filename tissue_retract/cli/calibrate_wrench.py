@@ -9,8 +9,9 @@ recordings, the public WPI and radiang CSV layouts)::
 The first fits on the ``--from`` logs and checks on ``--held-out`` (default: the last ``--from`` log when there
 are several, else the last third of the one); the second prints the free-space force error of the console's
 estimate and of the calibrated one on the logs, overall and by insertion depth and tool-tip speed, what a tare
-at the grasp would leave of it (:mod:`hardware_if.wrench.drift`), and its verdict: whether the file's bounds held
-on the samples inside the regimes they cover (exit 1 when not).
+at the grasp would leave of it (:mod:`hardware_if.wrench.drift`), how each joint's friction differs from the
+file's (:mod:`hardware_if.wrench.friction_shift`), and its verdict: whether the file's bounds held on the samples
+inside the regimes they cover (exit 1 when not).
 A log is fitted or checked on only when it shows an arm moving under its own dynamics
 (:func:`hardware_if.wrench.joint_logs.check_free_space_log`).
 
@@ -93,7 +94,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--check",
         metavar="F.json",
         help="print a calibration's free-space error on the --from logs, what a tare at the grasp would leave of it, "
-        "and whether the file's bounds held (exit 1 when not)",
+        "each joint's friction against the file's, and whether the file's bounds held (exit 1 when not)",
     )
     parser.add_argument("--json", metavar="OUT.json", help="with --check: write the figures as JSON")
     parser.add_argument(
@@ -284,6 +285,7 @@ def _offline(args: argparse.Namespace) -> int:
         unimproved,
         verdict_line,
     )
+    from hardware_if.wrench.friction_shift import friction_line, friction_shift
     from hardware_if.wrench.joint_logs import MIN_SAMPLES, check_free_space_log, read_joint_log
 
     def prepared(paths: list[str], field: str = "--from") -> list[Any]:
@@ -299,10 +301,11 @@ def _offline(args: argparse.Namespace) -> int:
         error = check_calibration(calibration, logs)
         print(f"the logs cover {coverage_line(logs)}")
         verdict = bound_verdict(calibration, error)
-        change = error_change(calibration, logs)
-        summary = error.summary() | verdict | {"error_change_one_way": change}
+        change, friction = error_change(calibration, logs), friction_shift(calibration, logs)
+        summary = error.summary() | verdict | {"error_change_one_way": change, "friction_shift": friction}
         print(_table(summary))
         print(change_line(change))
+        print(friction_line(friction))
         print(verdict_line(verdict))
         if args.json:
             write_atomic(args.json, json.dumps(summary, indent=2) + "\n", "--json")

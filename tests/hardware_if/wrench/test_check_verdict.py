@@ -121,3 +121,30 @@ def test_the_check_says_what_a_tare_at_the_grasp_would_leave(fitted: dict[str, P
         assert put["max_change_n"] == pytest.approx(plain["max_change_n"], rel=1e-6)
         assert put["max_error_n"] > plain["max_error_n"] + 1.0
         assert abs(moved["max_change_n"] - 1.5 * plain["lag_s"]) <= plain["max_change_n"] + 1e-9
+
+
+def test_the_check_says_how_each_joints_friction_differs(fitted: dict[str, Path], tmp_path: Path) -> None:
+    """A log of the same arm with 0.1 N m more Coulomb friction on the pitch than the file's: the check reads +0.1
+    on the pitch (half the difference of its mean error moving forward and back) and about none on the other
+    joints, and the force that makes at the tip; a log of the arm as fitted reads about none anywhere."""
+
+    def more_pitch_friction(q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+        effort[:, 1] += 0.1 * np.sign(qd[:, 1])
+
+    def check(name: str, edit: Callable[..., None] | None) -> dict[str, dict]:
+        log = arm_bag(tmp_path / name, SAMPLES, 2.0, noise=0.002, edit=edit)
+        report = tmp_path / f"{name}.json"
+        done = run_cli(
+            "calibrate-wrench", "--check", str(fitted["calibration"]), "--from", str(log), "--json", str(report)
+        )
+        assert "friction against the file's, by joint" in done.stdout, done.stdout
+        return {row["joint"]: row for row in json.loads(report.read_text())["friction_shift"]}
+
+    same, more = check("same", None), check("more", more_pitch_friction)
+    assert list(same) == ["yaw", "pitch", "insertion", "roll", "wrist_pitch", "wrist_yaw"]
+    for joint, row in same.items():
+        assert row["samples_forward"] > 100 and row["samples_back"] > 100, row
+        assert abs(row["shift"]) < 0.01, row
+        assert abs(more[joint]["shift"] - (0.1 if joint == "pitch" else 0.0)) < 0.01, more[joint]
+    assert more["pitch"]["unit"] == "N m" and more["insertion"]["unit"] == "N"
+    assert more["pitch"]["tip_force_n"] > 10 * same["pitch"]["tip_force_n"] > 0.0
