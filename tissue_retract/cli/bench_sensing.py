@@ -14,7 +14,10 @@ by insertion depth and tool-tip speed, the RMS of:
 With ``--calibration F.json`` (a ``calibrate-wrench`` file fitted on another log) it prints the same for what
 a calibrated deploy reads: the calibrated error on the log with its accelerations (a deploy gives the
 calibration the chain's commanded acceleration, which the arm tracks), the ``dvrk-calibrated`` preset's, and
-the calibrated error with no acceleration at all, for scale. Ratios are model over real: the presets' error
+the calibrated error with no acceleration at all, for scale, and what the identified arm's own parameters leave
+with the log's accelerations (``<arm>, exact``): the least a calibration that found that arm exactly would leave,
+on a ``sim-dvrk`` log (whose console draws its efforts from that arm) the floor below which no fit of the log's
+velocities can go. Ratios are model over real: the presets' error
 statistics should be within 25 % of the real ones (0.75-1.25) in the bins a log covers. A bin of fewer than
 :data:`THIN_SAMPLES` samples is marked thin (``thin`` in the JSON): its RMS is a few samples', not the bin's.
 After each table one line judges the preset (``dvrk``, ``dvrk-calibrated``) on the bins that are not thin:
@@ -344,6 +347,7 @@ def run(args: argparse.Namespace) -> int:
         with given_as("--held-out" if args.write_arm else "--from", "--from"):  # --write-arm compares on --held-out
             log = prepare_log(read_joint_log(path, arm=args.arm, rate_hz=args.rate))
         console, said = _log_console(path, log.log.layout)
+        arm_model = log.model_efforts(arm.parameter_vector())  # the identified arm's efforts along the log
         print(f"{path}: console: {console} ({said})")
         entry: dict[str, Any] = {
             "logged_by": {"console": console, "said_by": said, "layout": log.log.layout},
@@ -352,10 +356,7 @@ def run(args: argparse.Namespace) -> int:
                 {
                     _CONSOLE_COLUMN[console]: _norms(log, log.log.effort),
                     "dvrk preset": _over_draws(args.draws, functools.partial(_preset_errors, log, "dvrk")),
-                    f"{arm.name}": _over_draws(
-                        args.draws,
-                        functools.partial(_arm_errors, log, arm, log.model_efforts(arm.parameter_vector())),
-                    ),
+                    f"{arm.name}": _over_draws(args.draws, functools.partial(_arm_errors, log, arm, arm_model)),
                 },
             ),
         }
@@ -370,10 +371,17 @@ def run(args: argparse.Namespace) -> int:
                         args.draws, functools.partial(_preset_errors, log, "dvrk-calibrated")
                     ),
                     "no acceleration": error.after_live_n,
+                    f"{arm.name}, exact": _norms(log, log.log.effort - arm_model),
                 },
             )
             _print(f"{path}: calibrated by {args.calibration}", entry["calibrated"], ("dvrk-calibrated",))
             if not entry["calibrated"]["agreement"]["dvrk-calibrated"]["within"]:
+                rms = entry["calibrated"]["rms_n"]
+                print(
+                    f"  (the {arm.name} arm's own parameters leave {rms[f'{arm.name}, exact']:.2f} N RMS on this log, "
+                    f"the calibration {rms[_CALIBRATED_COLUMN[console]]:.2f} N: on a log of that arm, or of sim-dvrk, "
+                    "which draws its efforts from it, about the least a fit of its model leaves)"
+                )
                 print(
                     "  (tune-safety and robustness take this calibration's bound as their sensing with "
                     f"--wrench-calibration {args.calibration}, in place of --force-sensing dvrk-calibrated)"

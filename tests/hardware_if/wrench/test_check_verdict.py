@@ -148,3 +148,22 @@ def test_the_check_says_how_each_joints_friction_differs(fitted: dict[str, Path]
         assert abs(more[joint]["shift"] - (0.1 if joint == "pitch" else 0.0)) < 0.01, more[joint]
     assert more["pitch"]["unit"] == "N m" and more["insertion"]["unit"] == "N"
     assert more["pitch"]["tip_force_n"] > 10 * same["pitch"]["tip_force_n"] > 0.0
+
+
+def test_bench_sensing_says_what_the_arms_own_parameters_leave(fitted: dict[str, Path], tmp_path: Path) -> None:
+    """bench sensing with the calibration: beside the calibrated error, what the identified arm's exact parameters
+    leave on the log. On a log of that arm's efforts they leave as little as the calibration fitted on another of its
+    logs, and much less than on a log of an arm whose efforts are 1.5 x as large; the column is in the table and the
+    JSON."""
+    report = tmp_path / "bench.json"
+    done = run_cli("bench", "sensing", "--from", str(fitted["same_arm"]), str(fitted["other_arm"]), "--calibration",
+                   str(fitted["calibration"]), "--draws", "1", "--json", str(report))  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    logs = json.loads(report.read_text())["logs"]
+    same, other = (logs[str(fitted[name])]["calibrated"] for name in ("same_arm", "other_arm"))
+    for entry in (same, other):
+        assert entry["columns"][-1] == "wpi-psm, exact", entry["columns"]
+    exact, calibrated = same["rms_n"]["wpi-psm, exact"], same["rms_n"]["logged, calibrated"]
+    assert 0.0 < exact <= 1.2 * calibrated  # on the arm's own log, as little as the calibration fitted on it leaves
+    assert other["rms_n"]["wpi-psm, exact"] > 2 * exact
+    assert "wpi-psm, exact" in done.stdout
