@@ -48,19 +48,20 @@ def _next_break(breaks: np.ndarray) -> np.ndarray:
     return at[np.searchsorted(at, np.arange(len(breaks)), side="right")]
 
 
-def error_change(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) -> list[dict[str, Any]]:
-    """The calibrated force error's change over one-directional motion at retraction speeds (see the module notes).
+def error_change(
+    calibration: WrenchCalibration, logs: Sequence[PreparedLog], residuals: Sequence[np.ndarray]
+) -> list[dict[str, Any]]:
+    """The calibrated force error's change over one-directional motion at retraction speeds (see the module notes);
+    ``residuals``: the calibrated effort errors of the logs (:func:`~hardware_if.wrench.fit.effort_residuals`).
 
     Returns:
         Per lag of :data:`CHANGE_LAGS_S`: ``lag_s``, ``pairs`` (samples that far apart within one such stretch),
         ``rms_change_n`` and ``max_change_n`` (of the error vector's change between them [N]: what a tare leaves),
         and ``max_error_n`` (the largest error at those samples [N]: what is left without one); None without pairs.
     """
-    parameters = calibration.parameter_vector()
     changes: dict[float, list[np.ndarray]] = {lag: [] for lag in CHANGE_LAGS_S}
     errors: dict[float, list[np.ndarray]] = {lag: [] for lag in CHANGE_LAGS_S}
-    for p in logs:
-        residual = p.log.effort * p.joint_mask - p.model_efforts(parameters)
+    for p, residual in zip(logs, residuals, strict=True):
         error = np.einsum("kij,kj->ki", p.projector, residual)
         inside = (p.tip_speed_m_s <= RETRACTION_TIP_SPEED_M_S) & within_accelerations(
             calibration.covered_acceleration, p.qdd * p.joint_mask

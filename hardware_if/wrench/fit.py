@@ -82,6 +82,7 @@ __all__ = [
     "coverage_line",
     "covered_acceleration",
     "covered_tip_speed",
+    "effort_residuals",
     "fit_calibration",
     "inertia_allowance_n",
     "prepare_log",
@@ -383,6 +384,14 @@ def _free_space_errors(
         )
         for m in range(k)
     ]
+
+
+def effort_residuals(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) -> list[np.ndarray]:
+    """Per log, the calibrated effort error of each sample and joint (N, 6) [N m, N on the insertion], the
+    accelerations from the log: what ``--check``'s tare (:mod:`~hardware_if.wrench.drift`) and friction
+    (:mod:`~hardware_if.wrench.friction_shift`) figures read, computed once for both."""
+    parameters = calibration.parameter_vector()
+    return [p.log.effort * p.joint_mask - p.model_efforts(parameters) for p in logs]
 
 
 def check_calibration(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) -> FreeSpaceError:

@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 
-from hardware_if.wrench.calibration import WrenchCalibration
 from hardware_if.wrench.fit import PreparedLog
 from hardware_if.wrench.joint_logs import JOINT_NAMES
 from psm_control.effort_model import shared_regressor
@@ -36,8 +35,9 @@ def _mean(values: np.ndarray) -> float | None:
     return float(values.mean()) if len(values) else None
 
 
-def friction_shift(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) -> list[dict[str, Any]]:
-    """Per arm joint, the calibrated effort error by direction of motion on ``logs`` (see the module notes).
+def friction_shift(logs: Sequence[PreparedLog], residuals: Sequence[np.ndarray]) -> list[dict[str, Any]]:
+    """Per arm joint, the calibrated effort error by direction of motion on ``logs`` (see the module notes);
+    ``residuals``: their calibrated effort errors (:func:`~hardware_if.wrench.fit.effort_residuals`).
 
     Returns:
         One entry per joint: ``joint``, ``unit`` (of the efforts: ``N m``, ``N`` on the insertion),
@@ -46,12 +46,10 @@ def friction_shift(calibration: WrenchCalibration, logs: Sequence[PreparedLog]) 
         ``shift`` makes at the tool tip [N]); the figures are None on a joint the logs do not carry or that does
         not move both ways.
     """
-    parameters = calibration.parameter_vector()
     forward: list[list[np.ndarray]] = [[] for _ in JOINT_NAMES]
     back: list[list[np.ndarray]] = [[] for _ in JOINT_NAMES]
     reach: list[list[np.ndarray]] = [[] for _ in JOINT_NAMES]  # the tip force of a unit effort on the joint
-    for p in logs:
-        residual = p.log.effort * p.joint_mask - p.model_efforts(parameters)
+    for p, residual in zip(logs, residuals, strict=True):
         for joint in np.flatnonzero(p.joint_mask):
             velocity = p.qd[:, joint]
             ahead, behind = velocity > MOVING_SPEED, velocity < -MOVING_SPEED

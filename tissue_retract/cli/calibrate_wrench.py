@@ -280,6 +280,7 @@ def _offline(args: argparse.Namespace) -> int:
         bound_verdict,
         check_calibration,
         coverage_line,
+        effort_residuals,
         fit_calibration,
         prepare_log,
         unimproved,
@@ -301,7 +302,8 @@ def _offline(args: argparse.Namespace) -> int:
         error = check_calibration(calibration, logs)
         print(f"the logs cover {coverage_line(logs)}")
         verdict = bound_verdict(calibration, error)
-        change, friction = error_change(calibration, logs), friction_shift(calibration, logs)
+        residuals = effort_residuals(calibration, logs)  # one pass over the logs' regressors for both
+        change, friction = error_change(calibration, logs, residuals), friction_shift(logs, residuals)
         summary = error.summary() | verdict | {"error_change_one_way": change, "friction_shift": friction}
         print(_table(summary))
         print(change_line(change))
