@@ -265,7 +265,7 @@ class PsmClient(ArmListener):
         self._command_publisher("servo_jp")  # a listen-only client refuses before touching the deadman
         with self._lock:
             self._commanding = True
-            self._clock_pinned = True
+            self.pin_clock()  # the lock is re-entrant
             status = self._apply_deadman()
             if status.holding:
                 self._send_hold()
